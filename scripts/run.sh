@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Set up the venv (scripts/setup.sh), then run the main job: `vmas-ros demo`,
+# a short headless simulation. Extra arguments go to `vmas-ros demo`.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+bash scripts/setup.sh
+
+VENV="${VMAS_ROS_VENV:-.venv}"
+case "$VENV" in /*) ;; *) VENV="$ROOT/$VENV" ;; esac
+
+export RMW_IMPLEMENTATION=rmw_fastrtps_cpp  # the only RMW the venv has
+export PATH="$VENV/bin:$PATH"
+exec "$VENV/bin/vmas-ros" demo "$@"

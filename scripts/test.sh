@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Set up the venv (scripts/setup.sh), then run the test suite in it.
+# Extra arguments go to pytest, e.g. `bash scripts/test.sh test/test_package.py -x`.
+# With no file arguments pytest collects `test/` (testpaths in pytest.ini).
+# Exits with pytest's exit code.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+bash scripts/setup.sh
+
+VENV="${VMAS_ROS_VENV:-.venv}"
+case "$VENV" in /*) ;; *) VENV="$ROOT/$VENV" ;; esac
+
+# A DDS domain of its own per session, so parallel runs don't see each other.
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( RANDOM % 100 + 1 ))}"
+export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
+export PATH="$VENV/bin:$PATH"
+echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"
+
+exec "$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider "$@"

@@ -1,0 +1,55 @@
+"""Packaging for vmas_ros: a pip-installable Python package and a ROS 2
+ament_python package (``colcon build``) at the same time."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "vmas_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    description="Vectorized 2D multi-robot simulator in PyTorch (VMAS-compatible) with a ROS 2 node",
+    maintainer="vmas_ros team",
+    maintainer_email="vmas-ros@example.com",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"], exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.py"))),
+    ],
+    # torch is deliberately unpinned here; scripts/setup.sh installs the pinned
+    # CPU build first (see README).
+    install_requires=["numpy", "torch", "gymnasium", "pillow", "pyyaml", "tqdm"],
+    extras_require={
+        "ros": [
+            "ros-jazzy-rclpy",
+            "ros-jazzy-common-interfaces",
+            "ros-jazzy-rmw-fastrtps-cpp",
+            "ros-jazzy-std-srvs",
+            "ros-jazzy-rosgraph-msgs",
+        ],
+        "foxglove": ["foxglove-sdk"],
+        "record": ["mcap", "mcap-ros2-support"],
+        "train": ["torchrl", "onnx", "onnxruntime", "matplotlib"],
+        "test": [
+            "pytest",
+            "pytest-timeout",
+            "vmas==1.5.2",
+            "mpe2",
+            "rosbags",
+            "colcon-common-extensions",
+            "hypothesis",
+        ],
+    },
+    entry_points={
+        "console_scripts": [
+            "vmas-ros = vmas_ros.cli:main",
+        ],
+    },
+    zip_safe=False,
+)

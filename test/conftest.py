@@ -1,0 +1,40 @@
+"""Shared fixtures for the vmas_ros test suite."""
+
+import os
+import random
+
+import pytest
+import torch
+
+
+def _available_devices():
+    devices = ["cpu"]
+    if torch.cuda.is_available():
+        devices.append("cuda")
+    return devices
+
+
+def pytest_configure(config):
+    # Before any test (or collection-time import) creates a ROS context: a DDS
+    # domain of this session's own, so parallel sessions don't see each other.
+    # scripts/test.sh already exports one; this covers a bare `pytest`.
+    if not os.environ.get("ROS_DOMAIN_ID"):
+        os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
+    os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+
+
+@pytest.fixture(params=_available_devices())
+def device(request):
+    """Each available torch device: ``cpu``, plus ``cuda`` when there is one."""
+    return torch.device(request.param)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def ros_domain_id():
+    """The session's ROS_DOMAIN_ID (set in pytest_configure if it was unset)."""
+    value = os.environ.get("ROS_DOMAIN_ID", "")
+    if not value:
+        value = str(random.randint(1, 100))
+        os.environ["ROS_DOMAIN_ID"] = value
+    assert value.isdigit() and 0 <= int(value) <= 232, f"bad ROS_DOMAIN_ID={value!r}"
+    return int(value)

@@ -1,0 +1,348 @@
+"""The vectorized multi-agent environment (VMAS 1.5 ``Environment`` API).
+
+``Environment`` steps ``num_envs`` copies of a scenario at once. Observations,
+rewards and infos are lists (or dicts by agent name) of tensors whose first
+dimension is the env. Each instance keeps its own random number generator
+state, so two envs built with the same seed replay each other exactly, and
+other code using torch's global RNG does not disturb them.
+"""
+from __future__ import annotations
+
+import contextlib
+import random
+from typing import Dict, List, Optional, Sequence, Union
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from torch import Tensor
+
+from vmas_ros.envs import actions as act
+from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
+
+__all__ = ["Environment"]
+
+
+def _has_noise(u_noise) -> bool:
+    values = u_noise if isinstance(u_noise, (list, tuple)) else [u_noise]
+    return any(float(v) != 0 for v in values)
+
+
+class Environment:
+    """A batch of ``num_envs`` environments of one scenario, stepped together."""
+
+    def __init__(
+        self,
+        scenario: BaseScenario,
+        num_envs: int = 32,
+        device="cpu",
+        max_steps: Optional[int] = None,
+        continuous_actions: bool = True,
+        seed: Optional[int] = None,
+        dict_spaces: bool = False,
+        multidiscrete_actions: bool = False,
+        clamp_actions: bool = False,
+        grad_enabled: bool = False,
+        terminated_truncated: bool = False,
+        **kwargs,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
+        if max_steps is not None and (not isinstance(max_steps, int) or max_steps < 1):
+            raise ValueError(f"max_steps must be None or a positive int, got {max_steps!r}")
+        if multidiscrete_actions and continuous_actions:
+            raise ValueError("multidiscrete_actions=True needs continuous_actions=False")
+        self.scenario = scenario
+        self.num_envs = num_envs
+        self.device = torch.device(device)
+        self.max_steps = max_steps
+        self.continuous_actions = continuous_actions
+        self.dict_spaces = dict_spaces
+        self.multidiscrete_actions = multidiscrete_actions
+        self.clamp_action = clamp_actions
+        self.grad_enabled = grad_enabled
+        self.terminated_truncated = terminated_truncated
+        self._rng_state: Optional[dict] = None
+        self._seed_rng(0 if seed is None else seed)
+        with self._own_rng():
+            self.world = scenario.env_make_world(num_envs, self.device, **kwargs)
+        self.agents = self.world.policy_agents
+        self.n_agents = len(self.agents)
+        self.steps = torch.zeros(num_envs, device=self.device)
+        observations = self.reset()
+        self.action_space = self.get_action_space()
+        self.observation_space = self.get_observation_space(observations)
+        self._renderer = None
+
+    # --------------------------------------------------------------- randomness
+    def _seed_rng(self, seed: int) -> None:
+        with torch.random.fork_rng(devices=self._cuda_devices()):
+            torch.manual_seed(seed)
+            self._rng_state = self._capture_rng()
+        self._rng_state["numpy"] = np.random.RandomState(seed).get_state()
+        self._rng_state["python"] = random.Random(seed).getstate()
+
+    def _cuda_devices(self) -> list:
+        return [self.device] if self.device.type == "cuda" else []
+
+    def _capture_rng(self) -> dict:
+        state = {"torch": torch.random.get_rng_state()}
+        if self.device.type == "cuda":
+            state["cuda"] = torch.cuda.get_rng_state(self.device)
+        return state
+
+    @contextlib.contextmanager
+    def _own_rng(self):
+        """Run scenario code with this env's RNG streams, then restore the caller's."""
+        saved = self._capture_rng()
+        saved_np, saved_py = np.random.get_state(), random.getstate()
+        torch.random.set_rng_state(self._rng_state["torch"])
+        if "cuda" in self._rng_state:
+            torch.cuda.set_rng_state(self._rng_state["cuda"], self.device)
+        np.random.set_state(self._rng_state["numpy"])
+        random.setstate(self._rng_state["python"])
+        try:
+            yield
+        finally:
+            mine = self._capture_rng()
+            mine["numpy"], mine["python"] = np.random.get_state(), random.getstate()
+            self._rng_state = mine
+            torch.random.set_rng_state(saved["torch"])
+            if "cuda" in saved:
+                torch.cuda.set_rng_state(saved["cuda"], self.device)
+            np.random.set_state(saved_np)
+            random.setstate(saved_py)
+
+    def seed(self, seed: Optional[int] = None) -> List[int]:
+        """Re-seed this env's own random streams (torch, numpy, random)."""
+        seed = 0 if seed is None else int(seed)
+        self._seed_rng(seed)
+        return [seed]
+
+    # -------------------------------------------------------------------- reset
+    def reset(self, seed: Optional[int] = None, return_observations: bool = True, return_info: bool = False, return_dones: bool = False):
+        """Reset every env; returns the observations (and infos/dones if asked)."""
+        if seed is not None:
+            self.seed(seed)
+        with self._own_rng():
+            self.scenario.env_reset_world_at(None)
+            self.steps = torch.zeros(self.num_envs, device=self.device)
+            result = self._collect(return_observations, False, return_info, return_dones)
+        return result[0] if result and len(result) == 1 else result
+
+    def reset_at(self, index, return_observations: bool = True, return_info: bool = False, return_dones: bool = False):
+        """Reset some envs: ``index`` is an int, a sequence/tensor of ints or a [num_envs] bool mask."""
+        indices = as_index_tensor(index, self.num_envs, self.device)
+        with self._own_rng():
+            if indices.numel():
+                if isinstance(index, int):
+                    self.scenario.env_reset_world_at(int(indices[0]))
+                elif self.scenario.supports_batched_reset:
+                    self.scenario.env_reset_world_at(indices)
+                else:  # VMAS scenarios take one int at a time
+                    for i in indices.tolist():
+                        self.scenario.env_reset_world_at(i)
+                self.steps[indices] = 0
+            result = self._collect(return_observations, False, return_info, return_dones)
+        return result[0] if result and len(result) == 1 else result
+
+    # --------------------------------------------------------------------- step
+    def step(self, actions: Union[Sequence, Dict]):
+        """Apply one action per agent to every env and advance the world by one step.
+
+        Returns ``obs, rews, dones, infos`` (or ``obs, rews, terminated, truncated,
+        infos`` with ``terminated_truncated=True``).
+        """
+        actions = self._ordered_actions(actions)
+        with self._own_rng(), torch.set_grad_enabled(self.grad_enabled):
+            self._set_actions(actions)
+            for agent in self.world.agents:
+                self.scenario.env_process_action(agent)
+            self.scenario.pre_step()
+            self.world.step()
+            self.scenario.post_step()
+            self.steps = self.steps + 1
+            return self._collect(True, True, True, True)
+
+    def _ordered_actions(self, actions) -> list:
+        if isinstance(actions, dict):
+            names = [a.name for a in self.agents]
+            missing = [n for n in names if n not in actions]
+            unknown = [k for k in actions if k not in names]
+            if missing or unknown:
+                raise ValueError(f"action dict must have exactly the agents {names}; missing {missing}, unknown {unknown}")
+            return [actions[n] for n in names]
+        if not isinstance(actions, (list, tuple)):
+            raise ValueError(f"actions must be a list (one per agent) or a dict by agent name, got {type(actions).__name__}")
+        if len(actions) != self.n_agents:
+            raise ValueError(f"expected actions for {self.n_agents} agents, got {len(actions)}")
+        return list(actions)
+
+    def _set_actions(self, actions: list) -> None:
+        tensors, lows, highs, names = [], [], [], []
+        for agent, action in zip(self.agents, actions):
+            size = self.get_agent_action_size(agent)
+            action = act.to_action_tensor(action, agent.name, self.num_envs, size, self.device, self.continuous_actions)
+            if not self.grad_enabled:
+                action = action.detach()
+            low, high = self._action_bounds(agent)
+            if self.clamp_action and self.continuous_actions:
+                action = torch.maximum(torch.minimum(action.float(), high), low)
+            tensors.append(action)
+            lows.append(low)
+            highs.append(high)
+            names.append(agent.name)
+        act.check_finite_and_range(tensors, lows, highs, names, "continuous" if self.continuous_actions else "discrete")
+        for agent, action in zip(self.agents, tensors):
+            self._apply_action(agent, action)
+
+    def _action_bounds(self, agent):
+        """Inclusive [low, high] per action column, as tensors on the env's device."""
+        comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
+        if self.continuous_actions:
+            u = agent.action.u_range_tensor
+            low = torch.cat([-u, torch.zeros(comm, device=self.device)])
+            high = torch.cat([u, torch.ones(comm, device=self.device)])
+            return low, high
+        space = self.get_agent_action_space(agent)
+        if self.multidiscrete_actions:
+            return torch.zeros(len(space.nvec), device=self.device), torch.tensor(space.nvec - 1, device=self.device, dtype=torch.float32)
+        return torch.zeros(1, device=self.device), torch.tensor([space.n - 1], device=self.device, dtype=torch.float32)
+
+    def _apply_action(self, agent, action: Tensor) -> None:
+        comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
+        size = agent.action_size
+        if self.continuous_actions:
+            u, c = action[:, :size].float(), action[:, size:].float()
+        else:
+            nvec = list(agent.discrete_action_nvec) + ([comm] if comm else [])
+            choices = action.long() if self.multidiscrete_actions else act.unflatten_discrete(action[:, 0], nvec)
+            u = act.discrete_to_continuous(choices[:, :size], agent.discrete_action_nvec, agent.action.u_range_tensor)
+            c = None
+            if comm:
+                c = torch.nn.functional.one_hot(choices[:, size], comm).float()
+        u = u * agent.action.u_multiplier_tensor
+        if _has_noise(agent.action.u_noise):
+            u = u + torch.randn_like(u) * agent.action.u_noise_tensor
+        agent.action.u = u
+        if comm:
+            if agent.c_noise > 0:
+                c = c + torch.randn_like(c) * agent.c_noise
+            agent.action.c = c
+
+    # --------------------------------------------------------------- collection
+    def _collect(self, get_obs: bool, get_rewards: bool, get_infos: bool, get_dones: bool, dict_agent_names: Optional[bool] = None):
+        if not (get_obs or get_rewards or get_infos or get_dones):
+            return None
+        by_name = self.dict_spaces if dict_agent_names is None else dict_agent_names
+
+        def gather(fn, clone):
+            values = [clone(fn(agent)) for agent in self.agents]
+            return {a.name: v for a, v in zip(self.agents, values)} if by_name else values
+
+        # rewards first, then observations: scenarios may cache work in reward()
+        rewards = gather(self.scenario.reward, lambda r: r.clone()) if get_rewards else None
+        obs = gather(self.scenario.observation, TorchUtils.recursive_clone) if get_obs else None
+        infos = gather(self.scenario.info, TorchUtils.recursive_clone) if get_infos else None
+        if self.terminated_truncated:
+            terminated = truncated = None
+            if get_dones:
+                terminated, truncated = self._done()
+            result = [obs, rewards, terminated, truncated, infos]
+        else:
+            dones = self._done() if get_dones else None
+            result = [obs, rewards, dones, infos]
+        return [value for value in result if value is not None]
+
+    def get_from_scenario(self, get_observations: bool, get_rewards: bool, get_infos: bool, get_dones: bool, dict_agent_names: Optional[bool] = None):
+        with self._own_rng():
+            return self._collect(get_observations, get_rewards, get_infos, get_dones, dict_agent_names)
+
+    def _done(self):
+        terminated = self.scenario.done().clone()
+        truncated = None if self.max_steps is None else self.steps >= self.max_steps
+        if self.terminated_truncated:
+            return terminated, (torch.zeros_like(terminated) if truncated is None else truncated)
+        return terminated if truncated is None else terminated | truncated
+
+    def done(self):
+        with self._own_rng():
+            return self._done()
+
+    # ------------------------------------------------------------------- spaces
+    def get_agent_action_size(self, agent) -> int:
+        comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
+        if self.continuous_actions:
+            return agent.action.action_size + comm
+        if self.multidiscrete_actions:
+            return agent.action_size + (1 if comm else 0)
+        return 1
+
+    def get_agent_action_space(self, agent) -> spaces.Space:
+        comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
+        if self.continuous_actions:
+            u = agent.action.u_range_tensor.tolist()
+            low = np.array([-x for x in u] + [0.0] * comm, dtype=np.float32)
+            high = np.array(u + [1.0] * comm, dtype=np.float32)
+            return spaces.Box(low=low, high=high, shape=(len(u) + comm,), dtype=np.float32)
+        nvec = list(agent.discrete_action_nvec) + ([comm] if comm else [])
+        if self.multidiscrete_actions:
+            return spaces.MultiDiscrete(nvec)
+        return spaces.Discrete(int(np.prod(nvec)))
+
+    def get_action_space(self) -> spaces.Space:
+        if self.dict_spaces:
+            return spaces.Dict({a.name: self.get_agent_action_space(a) for a in self.agents})
+        return spaces.Tuple([self.get_agent_action_space(a) for a in self.agents])
+
+    def get_agent_observation_space(self, agent, obs) -> spaces.Space:
+        if isinstance(obs, Tensor):
+            return spaces.Box(low=-np.inf, high=np.inf, shape=tuple(obs.shape[1:]), dtype=np.float32)
+        if isinstance(obs, dict):
+            return spaces.Dict({k: self.get_agent_observation_space(agent, v) for k, v in obs.items()})
+        raise TypeError(f"observation of agent {agent.name!r} must be a tensor or a dict of tensors, got {type(obs).__name__}")
+
+    def get_observation_space(self, observations) -> spaces.Space:
+        if self.dict_spaces:
+            return spaces.Dict({a.name: self.get_agent_observation_space(a, observations[a.name]) for a in self.agents})
+        return spaces.Tuple([self.get_agent_observation_space(a, o) for a, o in zip(self.agents, observations)])
+
+    # ----------------------------------------------------------- random actions
+    def get_random_action(self, agent) -> Tensor:
+        with self._own_rng():
+            if self.continuous_actions:
+                low, high = self._action_bounds(agent)
+                return low + (high - low) * torch.rand(self.num_envs, low.numel(), device=self.device)
+            space = self.get_agent_action_space(agent)
+            if self.multidiscrete_actions:
+                nvec = torch.tensor(space.nvec, device=self.device)
+                return (torch.rand(self.num_envs, len(space.nvec), device=self.device) * nvec).long()
+            return torch.randint(0, int(space.n), (self.num_envs, 1), device=self.device)
+
+    def get_random_actions(self) -> List[Tensor]:
+        return [self.get_random_action(agent) for agent in self.agents]
+
+    # ---------------------------------------------------------------- rendering
+    def render(self, mode: str = "rgb_array", env_index: int = 0, **kwargs):
+        """Draw env ``env_index`` headless into an RGB array [H, W, 3] (no display needed)."""
+        from vmas_ros.viz.scene import render_world
+
+        if mode not in ("rgb_array", "human"):
+            raise ValueError(f"render mode must be 'rgb_array' or 'human', got {mode!r}")
+        if not 0 <= env_index < self.num_envs:
+            raise ValueError(f"env_index {env_index} out of range for {self.num_envs} envs")
+        extra = self.scenario.extra_render(env_index)
+        return render_world(
+            self.world, env_index=env_index, extra_geoms=extra,
+            width=self.scenario.viewer_size[0], height=self.scenario.viewer_size[1],
+            zoom=self.scenario.viewer_zoom, plot_bounds=self.scenario.visualize_semidims, **kwargs,
+        )
+
+    def to(self, device) -> None:
+        self.device = torch.device(device)
+        self.scenario.to(self.device)
+        self.steps = self.steps.to(self.device)
+
+    def close(self) -> None:
+        """Nothing to release: rendering keeps no window open."""

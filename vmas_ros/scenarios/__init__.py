@@ -1,0 +1,44 @@
+"""The scenario registry: every task by name.
+
+``load(name)`` imports the scenario's module on demand and returns a fresh
+``Scenario`` instance; unknown names raise a ValueError listing the valid ones.
+"""
+from __future__ import annotations
+
+import difflib
+import importlib
+from typing import Dict, List
+
+#: name -> module path holding ``Scenario`` (and ``HeuristicPolicy``)
+REGISTRY: Dict[str, str] = {
+    "simple_spread": "vmas_ros.scenarios.mpe.simple_spread",
+    "waterfall": "vmas_ros.scenarios.waterfall",
+}
+
+MPE_SCENARIOS = sorted(name for name, path in REGISTRY.items() if ".mpe." in path)
+
+
+def list_scenarios() -> List[str]:
+    """Every registered scenario name, sorted."""
+    return sorted(REGISTRY)
+
+
+def _module(name: str):
+    if not isinstance(name, str) or name not in REGISTRY:
+        close = difflib.get_close_matches(str(name), REGISTRY, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown scenario {name!r}{hint}; valid scenarios: {', '.join(list_scenarios())}")
+    return importlib.import_module(REGISTRY[name.removesuffix('.py')])
+
+
+def load(name: str):
+    """A new ``Scenario`` instance of the registered scenario ``name``."""
+    return _module(name).Scenario()
+
+
+def heuristic(name: str):
+    """The ``HeuristicPolicy`` class shipped with scenario ``name``."""
+    module = _module(name)
+    if not hasattr(module, "HeuristicPolicy"):
+        raise ValueError(f"scenario {name!r} ships no HeuristicPolicy")
+    return module.HeuristicPolicy

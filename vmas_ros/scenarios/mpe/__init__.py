@@ -1,0 +1,1 @@
+"""Vectorized ports of OpenAI's Multi-Agent Particle Environments tasks."""

@@ -1,0 +1,117 @@
+"""simple_spread (MPE "cooperative navigation").
+
+Description
+    ``n_agents`` agents and as many landmarks. Agents must cover every landmark
+    while avoiding each other.
+Observation (per agent, in this order)
+    own position (2), own velocity (2), each landmark's position relative to
+    the agent (2 x n_landmarks), and, with ``obs_agents=True``, each other
+    agent's relative position (2 x (n_agents - 1)).
+Reward (shared by all agents, as in VMAS 1.5)
+    ``-n_agents * sum_l min_a |x_a - x_l|`` (how far each landmark is from its
+    closest agent, counted once per agent) minus 1 for every ordered pair of
+    agents that overlap.
+Starting state
+    Agents and landmarks uniform in [-1, 1]^2.
+Episode termination
+    Never (set ``max_steps``).
+Kwargs
+    ``n_agents`` (3), ``obs_agents`` (True).
+"""
+from __future__ import annotations
+
+import torch
+
+from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
+from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.utils import Color, ScenarioUtils
+
+AGENT_RADIUS = 0.15
+
+
+class Scenario(BaseScenario):
+    supports_batched_reset = True
+
+    def make_world(self, batch_dim: int, device, **kwargs) -> World:
+        n_agents = kwargs.pop("n_agents", 3)
+        self.obs_agents = kwargs.pop("obs_agents", True)
+        ScenarioUtils.check_kwargs_consumed(kwargs)
+        if not isinstance(n_agents, int) or n_agents < 1:
+            raise ValueError(f"simple_spread: n_agents must be a positive int, got {n_agents!r}")
+        world = World(batch_dim=batch_dim, device=device)
+        for i in range(n_agents):
+            world.add_agent(Agent(name=f"agent_{i}", collide=True, shape=Sphere(radius=AGENT_RADIUS), color=Color.BLUE))
+        for i in range(n_agents):
+            world.add_landmark(Landmark(name=f"landmark {i}", collide=False, color=Color.BLACK))
+        self._reward_cache = None
+        return world
+
+    def reset_world_at(self, env_index=None) -> None:
+        world = self.world
+        rows = world.batch_dim if env_index is None else (1 if isinstance(env_index, int) else len(env_index))
+        for entity in world.agents + world.landmarks:
+            pos = torch.empty(rows, world.dim_p, device=world.device).uniform_(-1.0, 1.0)
+            entity.set_pos(pos if env_index is None else pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
+
+    def _positions(self):
+        agents = torch.stack([a.state.pos for a in self.world.agents], dim=1)  # [B, A, 2]
+        landmarks = torch.stack([l.state.pos for l in self.world.landmarks], dim=1)  # [B, L, 2]
+        return agents, landmarks
+
+    def reward(self, agent: Agent) -> torch.Tensor:
+        if agent is self.world.agents[0]:
+            agents, landmarks = self._positions()
+            n_agents = agents.shape[1]
+            coverage = torch.cdist(agents, landmarks).min(dim=1).values.sum(dim=-1)  # [B]
+            radii = torch.tensor([a.shape.radius for a in self.world.agents], device=agents.device)
+            collides = torch.tensor([a.collide for a in self.world.agents], device=agents.device)
+            gaps = torch.linalg.vector_norm(agents.unsqueeze(2) - agents.unsqueeze(1), dim=-1)
+            overlap = gaps < radii.unsqueeze(0) + radii.unsqueeze(1)
+            overlap = overlap & collides.view(1, -1, 1) & ~torch.eye(n_agents, dtype=torch.bool, device=agents.device)
+            self._reward_cache = -n_agents * coverage - overlap.sum(dim=(1, 2)).float()
+        return self._reward_cache
+
+    def observation(self, agent: Agent) -> torch.Tensor:
+        agents, landmarks = self._positions()
+        parts = [agent.state.pos, agent.state.vel, (landmarks - agent.state.pos.unsqueeze(1)).flatten(1)]
+        if self.obs_agents:
+            others = [a for a in self.world.agents if a is not agent]
+            if others:
+                other_pos = torch.stack([a.state.pos for a in others], dim=1)
+                parts.append((other_pos - agent.state.pos.unsqueeze(1)).flatten(1))
+        return torch.cat(parts, dim=-1)
+
+
+class HeuristicPolicy(BaseHeuristicPolicy):
+    """Go to a landmark no closer agent is going to (greedy matching from one's own observation).
+
+    Each agent rebuilds the agent-landmark distance matrix from its observation,
+    assigns pairs greedily (globally nearest pair first), and steers to its own
+    landmark with a damped proportional controller.
+    """
+
+    gain = 3.0
+    damping = 1.0
+
+    def compute_action(self, observation: torch.Tensor, u_range: float) -> torch.Tensor:
+        batch = observation.shape[0]
+        vel = observation[:, 2:4]
+        rest = observation.shape[1] - 4
+        n = (rest + 2) // 4  # 2n landmark coords + 2(n-1) agent coords
+        landmarks = observation[:, 4:4 + 2 * n].view(batch, n, 2)
+        others = observation[:, 4 + 2 * n:].view(batch, -1, 2)
+        agents = torch.cat([torch.zeros(batch, 1, 2, device=observation.device), others], dim=1)  # self first
+        dist = torch.cdist(agents, landmarks)  # [B, A, L]
+        mine = torch.full((batch,), -1, dtype=torch.long, device=observation.device)
+        big = torch.finfo(dist.dtype).max
+        for _ in range(min(agents.shape[1], n)):
+            flat = dist.flatten(1).argmin(dim=1)
+            a, l = flat // n, flat % n
+            mine = torch.where((a == 0) & (mine < 0), l, mine)
+            dist = dist.scatter(1, a.view(-1, 1, 1).expand(-1, 1, n), big)
+            dist = dist.scatter(2, l.view(-1, 1, 1).expand(-1, dist.shape[1], 1), big)
+        mine = torch.where(mine < 0, 0, mine)
+        target = landmarks[torch.arange(batch, device=observation.device), mine]
+        action = self.gain * target - self.damping * vel
+        return action.clamp(-u_range, u_range)

@@ -1,0 +1,1 @@
+"""Low-level controllers that turn velocity commands into forces."""

@@ -1,0 +1,1 @@
+"""Dynamics models (Holonomic, HolonomicWithRotation, DiffDrive, KinematicBicycle)."""

@@ -1,0 +1,27 @@
+"""Hand-written policies: the baselines scenarios ship beside their task."""
+from __future__ import annotations
+
+import abc
+
+import torch
+
+__all__ = ["BaseHeuristicPolicy", "RandomPolicy"]
+
+
+class BaseHeuristicPolicy(abc.ABC):
+    """A decentralised policy mapping one agent's observation to its action, batched over envs."""
+
+    def __init__(self, continuous_action: bool = True) -> None:
+        self.continuous_actions = continuous_action
+
+    @abc.abstractmethod
+    def compute_action(self, observation: torch.Tensor, u_range: float) -> torch.Tensor:
+        """Action [batch, action_size] for observation [batch, obs_size]."""
+
+
+class RandomPolicy(BaseHeuristicPolicy):
+    """Gaussian noise clipped to the action range; the baseline heuristics must beat."""
+
+    def compute_action(self, observation: torch.Tensor, u_range: float) -> torch.Tensor:
+        n_envs = observation.shape[0]
+        return torch.clamp(torch.randn(n_envs, 2, device=observation.device), -u_range, u_range)

@@ -1,0 +1,99 @@
+"""BaseScenario: what a task defines (VMAS 1.5's scenario interface).
+
+A scenario builds a :class:`World` in ``make_world`` and says how to reset it,
+what each agent observes and earns, and when an env is done. Every method
+works on all envs at once: tensors have the batch dimension first.
+"""
+from __future__ import annotations
+
+import abc
+from typing import List, Optional
+
+import torch
+from torch import Tensor
+
+from vmas_ros.simulator.utils import INITIAL_VIEWER_SIZE, VIEWER_DEFAULT_ZOOM
+
+__all__ = ["BaseScenario"]
+
+
+class BaseScenario(abc.ABC):
+    """Subclass this and implement make_world, reset_world_at, observation and reward."""
+
+    #: Set True in scenarios whose ``reset_world_at`` accepts a 1-D tensor of env
+    #: indices; the environment then resets many envs in one call instead of one by one.
+    supports_batched_reset: bool = False
+
+    def __init__(self) -> None:
+        self._world = None
+        self.viewer_size = INITIAL_VIEWER_SIZE
+        self.viewer_zoom = VIEWER_DEFAULT_ZOOM
+        self.render_origin = (0.0, 0.0)
+        self.plot_grid = False
+        self.grid_spacing = 0.1
+        self.visualize_semidims = True
+
+    @property
+    def world(self):
+        if self._world is None:
+            raise RuntimeError("the scenario has no world yet: make_world must create and return it")
+        return self._world
+
+    def to(self, device) -> None:
+        for name, value in list(self.__dict__.items()):
+            if isinstance(value, Tensor):
+                self.__dict__[name] = value.to(device)
+        self.world.to(device)
+
+    # -- called by the environment; do not override --------------------------
+    def env_make_world(self, batch_dim: int, device, **kwargs):
+        self._world = self.make_world(batch_dim, device, **kwargs)
+        return self._world
+
+    def env_reset_world_at(self, env_index) -> None:
+        self.world.reset(env_index)
+        self.reset_world_at(env_index)
+
+    def env_process_action(self, agent) -> None:
+        if agent.action_script is not None:
+            agent.action_callback(self.world)
+        self.process_action(agent)
+        agent.dynamics.check_and_process_action()
+
+    # -- to implement ---------------------------------------------------------
+    @abc.abstractmethod
+    def make_world(self, batch_dim: int, device, **kwargs):
+        """Create the World, add agents/landmarks/joints, return it."""
+
+    @abc.abstractmethod
+    def reset_world_at(self, env_index: Optional[int] = None) -> None:
+        """Reset env ``env_index``, or every env when it is None."""
+
+    @abc.abstractmethod
+    def observation(self, agent):
+        """Observation of ``agent`` in every env: a [batch, n] tensor or a dict of them."""
+
+    @abc.abstractmethod
+    def reward(self, agent) -> Tensor:
+        """Reward of ``agent`` in every env, shape [batch]."""
+
+    def done(self) -> Tensor:
+        """Which envs are finished, shape [batch] bool. Default: never."""
+        return torch.zeros(self.world.batch_dim, dtype=torch.bool, device=self.world.device)
+
+    def info(self, agent) -> dict:
+        """Extra per-agent metrics, each a tensor with the batch dimension first."""
+        return {}
+
+    def extra_render(self, env_index: int = 0) -> List:
+        """Extra geoms (see simulator.rendering) drawn on top of env ``env_index``."""
+        return []
+
+    def process_action(self, agent) -> None:
+        """Change ``agent.action.u`` before the dynamics model reads it."""
+
+    def pre_step(self) -> None:
+        """Runs once before the physics step."""
+
+    def post_step(self) -> None:
+        """Runs once after the physics step."""

@@ -1,0 +1,138 @@
+"""Sensors agents carry. The Lidar casts all its rays in one batched call."""
+from __future__ import annotations
+
+import abc
+import math
+from typing import Callable, List, Optional, Tuple, Union
+
+import torch
+from torch import Tensor
+
+from vmas_ros.simulator.utils import Color
+
+__all__ = ["Sensor", "Lidar"]
+
+
+class Sensor(abc.ABC):
+    """Something an agent measures the world with; bound to its agent by ``Agent.add_sensor``."""
+
+    def __init__(self, world) -> None:
+        self._world = world
+        self._agent = None
+
+    @property
+    def agent(self):
+        return self._agent
+
+    @agent.setter
+    def agent(self, agent) -> None:
+        self._agent = agent
+
+    @abc.abstractmethod
+    def measure(self):
+        """Take a batched measurement for every env."""
+
+    @abc.abstractmethod
+    def render(self, env_index: int = 0) -> list:
+        """Geoms that show the last measurement."""
+
+    def to(self, device) -> None:
+        """Move internal tensors to ``device``."""
+
+
+class Lidar(Sensor):
+    """A 2D range finder: ``n_rays`` rays at angles relative to the agent's heading.
+
+    ``measure()`` returns distances [batch, n_rays]; ``max_range`` where a ray hits
+    nothing that passes ``entity_filter``. A full circle (start == end mod 2 pi)
+    spaces rays evenly without duplicating the first one.
+    """
+
+    def __init__(
+        self,
+        world,
+        angle_start: float = 0.0,
+        angle_end: float = 2 * math.pi,
+        n_rays: int = 8,
+        max_range: float = 1.0,
+        entity_filter: Callable = lambda _: True,
+        render_color: Union[Color, Tuple[float, float, float]] = Color.GRAY,
+        alpha: float = 1.0,
+        render: bool = True,
+    ) -> None:
+        super().__init__(world)
+        if not isinstance(n_rays, int) or n_rays < 1:
+            raise ValueError(f"Lidar n_rays must be an int >= 1, got {n_rays!r}")
+        if not max_range > 0:
+            raise ValueError(f"Lidar max_range must be > 0, got {max_range}")
+        full_circle = (angle_start - angle_end) % (2 * math.pi) < 1e-5
+        if full_circle:
+            angles = torch.linspace(angle_start, angle_end, n_rays + 1, device=world.device)[:n_rays]
+        else:
+            angles = torch.linspace(angle_start, angle_end, n_rays, device=world.device)
+        self._angles = angles.repeat(world.batch_dim, 1)
+        self._max_range = max_range
+        self._entity_filter = entity_filter
+        self._render_color = render_color
+        self._alpha = alpha
+        self._render = render
+        self._last_measurement: Optional[Tensor] = None
+
+    n_rays = property(lambda self: self._angles.shape[1])
+    max_range = property(lambda self: self._max_range)
+    alpha = property(lambda self: self._alpha)
+    last_measurement = property(lambda self: self._last_measurement)
+
+    @property
+    def angles(self) -> Tensor:
+        """Ray angles [batch, n_rays] relative to the agent's heading."""
+        return self._angles
+
+    @property
+    def entity_filter(self) -> Callable:
+        return self._entity_filter
+
+    @entity_filter.setter
+    def entity_filter(self, value: Callable) -> None:
+        self._entity_filter = value
+
+    @property
+    def render_color(self):
+        return self._render_color.value if isinstance(self._render_color, Color) else self._render_color
+
+    def to(self, device) -> None:
+        self._angles = self._angles.to(device)
+
+    def set_render(self, render: bool) -> None:
+        self._render = render
+
+    def measure(self, vectorized: bool = True) -> Tensor:
+        """Distances [batch, n_rays]; all rays and target entities in one batched cast."""
+        measurement = self._world.cast_rays(
+            self._agent, self._angles + self._agent.state.rot, self._max_range, self._entity_filter
+        )
+        self._last_measurement = measurement
+        return measurement
+
+    def render(self, env_index: int = 0) -> List:
+        from vmas_ros.simulator import rendering
+
+        if not self._render or self._last_measurement is None:
+            return []
+        geoms = []
+        origin = self._agent.state.pos[env_index].tolist()
+        heading = float(self._agent.state.rot[env_index])
+        for angle, dist in zip(self._angles[env_index].tolist(), self._last_measurement[env_index].tolist()):
+            ray = rendering.Line((0, 0), (dist, 0), width=0.05)
+            xform = rendering.Transform()
+            xform.set_translation(*origin)
+            xform.set_rotation(angle + heading)
+            ray.add_attr(xform)
+            ray.set_color(0, 0, 0, alpha=self._alpha)
+            tip = rendering.make_circle(0.01)
+            tip_xform = rendering.Transform()
+            tip_xform.set_translation(origin[0] + dist * math.cos(angle + heading), origin[1] + dist * math.sin(angle + heading))
+            tip.add_attr(tip_xform)
+            tip.set_color(*self.render_color, alpha=self._alpha)
+            geoms += [ray, tip]
+        return geoms

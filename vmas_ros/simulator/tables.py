@@ -1,0 +1,233 @@
+"""Per-entity property tables and contact pair lists, built once per world layout.
+
+The step is a fixed sequence of batched kernels over ``[batch, n_entities, ...]``
+tensors. Everything that does not change from step to step (masses, limits,
+which pairs can touch and with which kernel) is gathered here into tensors
+when entities are added or a property changes, never inside the step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, Tuple
+
+import torch
+from torch import Tensor
+
+from vmas_ros.simulator.shapes import Box, Line, Sphere
+
+#: collision kernels, keyed by the (first, second) shape kinds they take
+PAIR_KINDS: Tuple[Tuple[str, str], ...] = (
+    ("sphere", "sphere"),
+    ("line", "sphere"),
+    ("line", "line"),
+    ("box", "sphere"),
+    ("box", "line"),
+    ("box", "box"),
+)
+_KIND_ORDER = {"box": 0, "line": 1, "sphere": 2}
+
+
+@dataclass
+class PairTable:
+    """Entity indices of every pair handled by one collision kernel, plus shape params."""
+
+    kind: Tuple[str, str]
+    index_a: Tensor  # [P] long
+    index_b: Tensor  # [P] long
+    params: Dict[str, Tensor] = field(default_factory=dict)  # each [P]
+
+    @property
+    def index_ab(self) -> Tensor:
+        """[2P] indices a0, b0, a1, b1, ... for scattering both sides in pair order."""
+        return torch.stack([self.index_a, self.index_b], dim=1).flatten()
+
+    @property
+    def size(self) -> int:
+        return int(self.index_a.numel())
+
+
+@dataclass
+class JointTable:
+    """Static part of all joint constraints; fixed rotations are read per step."""
+
+    constraints: list
+    index_a: Tensor  # [J]
+    index_b: Tensor  # [J]
+    anchor_a: Tensor  # [J, 2] body-frame offsets
+    anchor_b: Tensor  # [J, 2]
+    dist: Tensor  # [J]
+    rotate: Tensor  # [J] bool
+    fixed_rotation_is_tensor: bool
+
+    @property
+    def index_ab(self) -> Tensor:
+        return torch.stack([self.index_a, self.index_b], dim=1).flatten()
+
+
+@dataclass
+class WorldTables:
+    """Everything the batched step needs to know about the entities, as tensors."""
+
+    n_entities: int
+    n_agents: int
+    mass: Tensor  # [N, 1]
+    inertia: Tensor  # [N, 1]
+    movable: Tensor  # [N, 1] bool
+    rotatable: Tensor  # [N, 1] bool
+    drag: Tensor  # [N, 1]
+    linear_friction: Tensor  # [N, 1]
+    angular_friction: Tensor  # [N, 1]
+    has_friction: bool
+    gravity_force: Tensor  # [1 or B, N, 2] mass * (world + entity gravity)
+    has_gravity: bool
+    max_speed: Tensor  # [N, 1], inf when unlimited
+    v_range: Tensor  # [N, 1], inf when unlimited
+    agent_max_f: Tensor  # [A, 1]
+    agent_f_range: Tensor  # [A, 1]
+    agent_max_t: Tensor  # [A, 1]
+    agent_t_range: Tensor  # [A, 1]
+    agent_movable: Tensor  # [A, 1] bool
+    agent_rotatable: Tensor  # [A, 1] bool
+    pairs: List[PairTable]
+    joints: JointTable | None
+
+
+def _value_or(value, default: float) -> float:
+    return default if value is None else float(value)
+
+
+def _column(values, device, dtype=torch.float32) -> Tensor:
+    return torch.tensor(values, device=device, dtype=dtype).reshape(-1, 1)
+
+
+def _pair_collides(world, a, b) -> bool:
+    """Static contact eligibility of an entity pair (evaluated when tables are built)."""
+    if a is b or not a.collides(b) or not b.collides(a):
+        return False
+    if not (a.movable or a.rotatable or b.movable or b.rotatable):
+        return False
+    return frozenset((a.name, b.name)) not in world._joint_constraints
+
+
+def _shape_params(prefix: str, shape) -> Dict[str, float]:
+    if isinstance(shape, Sphere):
+        return {f"{prefix}radius": shape.radius}
+    if isinstance(shape, Line):
+        return {f"{prefix}length": shape.length}
+    if isinstance(shape, Box):
+        return {f"{prefix}length": shape.length, f"{prefix}width": shape.width, f"{prefix}solid": float(not shape.hollow)}
+    raise TypeError(f"unsupported shape {shape!r}")
+
+
+def build_pairs(world, entities) -> List[PairTable]:
+    """Bucket every eligible entity pair by the collision kernel that handles it."""
+    buckets: Dict[Tuple[str, str], list] = {kind: [] for kind in PAIR_KINDS}
+    for i, a in enumerate(entities):
+        for j in range(i + 1, len(entities)):
+            b = entities[j]
+            if not _pair_collides(world, a, b):
+                continue
+            ia, ib = (i, j) if _KIND_ORDER[a.shape.kind] <= _KIND_ORDER[b.shape.kind] else (j, i)
+            kind = (entities[ia].shape.kind, entities[ib].shape.kind)
+            if kind not in buckets:
+                raise TypeError(f"no collision kernel for shapes {kind}")
+            buckets[kind].append((ia, ib))
+    tables = []
+    device = world.device
+    for kind, pairs in buckets.items():
+        if not pairs:
+            continue
+        rows = [
+            {
+                **_shape_params("a_", entities[ia].shape),
+                **_shape_params("b_", entities[ib].shape),
+                "reach": entities[ia].shape.circumscribed_radius() + entities[ib].shape.circumscribed_radius(),
+            }
+            for ia, ib in pairs
+        ]
+        params = {key: torch.tensor([row[key] for row in rows], device=device) for key in rows[0]}
+        tables.append(
+            PairTable(
+                kind=kind,
+                index_a=torch.tensor([p[0] for p in pairs], device=device, dtype=torch.long),
+                index_b=torch.tensor([p[1] for p in pairs], device=device, dtype=torch.long),
+                params=params,
+            )
+        )
+    return tables
+
+
+def build_joints(world, entities) -> JointTable | None:
+    constraints = list(world._joint_constraints.values())
+    if not constraints:
+        return None
+    index = {id(e): i for i, e in enumerate(entities)}
+    # VMAS visits joints in entity-pair order; summing in that order keeps bit parity
+    constraints.sort(key=lambda c: sorted((index[id(c.entity_a)], index[id(c.entity_b)])))
+    device = world.device
+    return JointTable(
+        constraints=constraints,
+        index_a=torch.tensor([index[id(c.entity_a)] for c in constraints], device=device, dtype=torch.long),
+        index_b=torch.tensor([index[id(c.entity_b)] for c in constraints], device=device, dtype=torch.long),
+        anchor_a=torch.tensor([c.entity_a.shape.get_delta_from_anchor(c.anchor_a) for c in constraints], device=device),
+        anchor_b=torch.tensor([c.entity_b.shape.get_delta_from_anchor(c.anchor_b) for c in constraints], device=device),
+        dist=torch.tensor([float(c.dist) for c in constraints], device=device),
+        rotate=torch.tensor([bool(c.rotate) for c in constraints], device=device),
+        fixed_rotation_is_tensor=any(isinstance(c.fixed_rotation, Tensor) for c in constraints),
+    )
+
+
+def _gravity_force(world, entities) -> Tuple[Tensor, bool]:
+    device = world.device
+    rows = []
+    batched = False
+    for e in entities:
+        g = world.gravity.to(device).reshape(1, 2)
+        if e.gravity is not None:
+            own = e.gravity if isinstance(e.gravity, Tensor) else torch.tensor(e.gravity, dtype=torch.float32)
+            own = own.to(device=device, dtype=torch.float32)
+            batched = batched or (own.dim() == 2 and own.shape[0] > 1)
+            g = g + own.reshape(-1, 2)
+        rows.append(g * e.mass)
+    if batched:
+        rows = [r.expand(world.batch_dim, 2) for r in rows]
+    force = torch.stack(rows, dim=1)  # [1 or B, N, 2]
+    has_gravity = bool((force != 0).any())
+    return force, has_gravity
+
+
+def build_tables(world) -> WorldTables:
+    """Read every entity property once into tensors on the world's device."""
+    entities = world.entities
+    agents = world.agents
+    device = world.device
+    world_lin, world_ang = world._linear_friction, world._angular_friction
+    lin = [_value_or(e.linear_friction, world_lin) for e in entities]
+    ang = [_value_or(e.angular_friction, world_ang) for e in entities]
+    gravity_force, has_gravity = _gravity_force(world, entities)
+    inf = math.inf
+    return WorldTables(
+        n_entities=len(entities),
+        n_agents=len(agents),
+        mass=_column([e.mass for e in entities], device),
+        inertia=_column([e.moment_of_inertia for e in entities], device),
+        movable=_column([bool(e.movable) for e in entities], device, torch.bool),
+        rotatable=_column([bool(e.rotatable) for e in entities], device, torch.bool),
+        drag=_column([_value_or(e.drag, world._drag) for e in entities], device),
+        linear_friction=_column(lin, device),
+        angular_friction=_column(ang, device),
+        has_friction=any(v > 0 for v in lin + ang),
+        gravity_force=gravity_force,
+        has_gravity=has_gravity,
+        max_speed=_column([_value_or(e.max_speed, inf) for e in entities], device),
+        v_range=_column([_value_or(e.v_range, inf) for e in entities], device),
+        agent_max_f=_column([_value_or(a.max_f, inf) for a in agents], device),
+        agent_f_range=_column([_value_or(a.f_range, inf) for a in agents], device),
+        agent_max_t=_column([_value_or(a.max_t, inf) for a in agents], device),
+        agent_t_range=_column([_value_or(a.t_range, inf) for a in agents], device),
+        agent_movable=_column([bool(a.movable) for a in agents], device, torch.bool),
+        agent_rotatable=_column([bool(a.rotatable) for a in agents], device, torch.bool),
+        pairs=build_pairs(world, entities),
+        joints=build_joints(world, entities),
+    )

@@ -1,0 +1,364 @@
+"""The world: owns the entities of a batch of envs and steps them together.
+
+Public API follows VMAS 1.5's ``World``. Internally a step gathers every
+entity's state into ``[batch, n_entities, ...]`` tensors (one ``stack`` per
+quantity), runs :func:`vmas_ros.simulator.physics.step`, and hands each
+entity a view of the result. Property tables are cached and rebuilt only when
+the set of entities or one of their physical properties changes.
+"""
+from __future__ import annotations
+
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import torch
+from torch import Tensor
+
+from vmas_ros.simulator import geometry as geo
+from vmas_ros.simulator import raycast
+from vmas_ros.simulator import physics
+from vmas_ros.simulator.entities import Agent, Entity, Landmark
+from vmas_ros.simulator.shapes import Box, Line, Sphere
+from vmas_ros.simulator.tables import WorldTables, build_tables
+from vmas_ros.simulator.utils import (
+    ANGULAR_FRICTION,
+    COLLISION_FORCE,
+    DRAG,
+    JOINT_FORCE,
+    LINE_MIN_DIST,
+    LINEAR_FRICTION,
+    TORQUE_CONSTRAINT_FORCE,
+)
+
+__all__ = ["World"]
+
+
+class World:
+    """A batch of ``batch_dim`` 2D worlds sharing the same entities (VMAS ``World``)."""
+
+    def __init__(
+        self,
+        batch_dim: int,
+        device,
+        dt: float = 0.1,
+        substeps: int = 1,
+        drag: float = DRAG,
+        linear_friction: float = LINEAR_FRICTION,
+        angular_friction: float = ANGULAR_FRICTION,
+        x_semidim: Optional[float] = None,
+        y_semidim: Optional[float] = None,
+        dim_c: int = 0,
+        collision_force: float = COLLISION_FORCE,
+        joint_force: float = JOINT_FORCE,
+        torque_constraint_force: float = TORQUE_CONSTRAINT_FORCE,
+        contact_margin: float = 1e-3,
+        gravity: Tuple[float, float] = (0.0, 0.0),
+    ) -> None:
+        if not isinstance(batch_dim, int) or batch_dim <= 0:
+            raise ValueError(f"batch_dim must be a positive int, got {batch_dim!r}")
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, got {dt}")
+        if not isinstance(substeps, int) or substeps < 1:
+            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
+        if not contact_margin > 0:
+            raise ValueError(f"contact_margin must be > 0, got {contact_margin}")
+        self._batch_dim = batch_dim
+        self._device = torch.device(device)
+        self._dt = dt
+        self._substeps = substeps
+        self._drag = drag
+        self._linear_friction = linear_friction
+        self._angular_friction = angular_friction
+        self._x_semidim = x_semidim
+        self._y_semidim = y_semidim
+        self._dim_c = dim_c
+        self._dim_p = 2
+        self._collision_force = collision_force
+        self._joint_force = joint_force
+        self._torque_constraint_force = torque_constraint_force
+        self._contact_margin = contact_margin
+        self._gravity = torch.tensor(gravity, device=self._device, dtype=torch.float32)
+        self._agents: List[Agent] = []
+        self._landmarks: List[Landmark] = []
+        self._joint_constraints: Dict[frozenset, object] = {}
+        self._tables: Optional[WorldTables] = None
+        self.entity_index_map: Dict[Entity, int] = {}
+        self._broad_phase = self.default_broad_phase
+
+    #: How contacts near the broad-phase radius are decided: "batch" (VMAS 1.5
+    #: behaviour, bit-for-bit parity) or "env" (each env independent of the others).
+    default_broad_phase: str = "batch"
+
+    @property
+    def broad_phase(self) -> str:
+        return self._broad_phase
+
+    @broad_phase.setter
+    def broad_phase(self, value: str) -> None:
+        if value not in ("batch", "env"):
+            raise ValueError(f"broad_phase must be 'batch' or 'env', got {value!r}")
+        self._broad_phase = value
+
+    # ------------------------------------------------------------------ registry
+    def add_agent(self, agent: Agent) -> None:
+        """Only way to add an agent; ``entities`` lists landmarks first, then agents (as VMAS)."""
+        self._check_new_name(agent)
+        agent._attach(self)
+        self._agents.append(agent)
+        self._invalidate_tables()
+
+    def add_landmark(self, landmark: Landmark) -> None:
+        self._check_new_name(landmark)
+        landmark._attach(self)
+        self._landmarks.append(landmark)
+        self._invalidate_tables()
+
+    def add_joint(self, joint) -> None:
+        """Add a joint (and the line landmark a joint of non-zero length carries)."""
+        if self._substeps <= 1:
+            raise ValueError(f"joints need World(substeps > 1) to stay stable, this world has substeps={self._substeps}")
+        if joint.landmark is not None:
+            self.add_landmark(joint.landmark)
+        for constraint in joint.joint_constraints:
+            self._joint_constraints[frozenset((constraint.entity_a.name, constraint.entity_b.name))] = constraint
+        self._invalidate_tables()
+
+    def _check_new_name(self, entity: Entity) -> None:
+        if any(e.name == entity.name for e in self.entities):
+            raise ValueError(f"an entity named {entity.name!r} is already in the world")
+
+    def _invalidate_tables(self) -> None:
+        self._tables = None
+
+    @property
+    def tables(self) -> WorldTables:
+        """Per-entity property tensors, rebuilt lazily after any change."""
+        if self._tables is None:
+            self._tables = build_tables(self)
+            self.entity_index_map = {e: i for i, e in enumerate(self.entities)}
+        return self._tables
+
+    def reset(self, env_index) -> None:
+        for e in self.entities:
+            e._reset(env_index)
+
+    def zero_grad(self) -> None:
+        for e in self.entities:
+            e.zero_grad()
+
+    def to(self, device) -> None:
+        self._device = torch.device(device)
+        self._gravity = self._gravity.to(self._device)
+        for e in self.entities:
+            e.to(self._device)
+        self._invalidate_tables()
+
+    # ---------------------------------------------------------------- properties
+    agents = property(lambda self: self._agents)
+    landmarks = property(lambda self: self._landmarks)
+    batch_dim = property(lambda self: self._batch_dim)
+    device = property(lambda self: self._device)
+    dt = property(lambda self: self._dt)
+    substeps = property(lambda self: self._substeps)
+    sub_dt = property(lambda self: self._dt / self._substeps)
+    dim_p = property(lambda self: self._dim_p)
+    dim_c = property(lambda self: self._dim_c)
+    x_semidim = property(lambda self: self._x_semidim)
+    y_semidim = property(lambda self: self._y_semidim)
+    drag = property(lambda self: self._drag)
+    gravity = property(lambda self: self._gravity)
+    collision_force = property(lambda self: self._collision_force)
+    joint_force = property(lambda self: self._joint_force)
+    contact_margin = property(lambda self: self._contact_margin)
+    torque_constraint_force = property(lambda self: self._torque_constraint_force)
+
+    @property
+    def joints(self) -> list:
+        return list(self._joint_constraints.values())
+
+    @property
+    def entities(self) -> List[Entity]:
+        return self._landmarks + self._agents
+
+    @property
+    def policy_agents(self) -> List[Agent]:
+        return [a for a in self._agents if a.action_script is None]
+
+    @property
+    def scripted_agents(self) -> List[Agent]:
+        return [a for a in self._agents if a.action_script is not None]
+
+    def _step_params(self) -> physics.StepParams:
+        return physics.StepParams(
+            dt=self._dt,
+            substeps=self._substeps,
+            collision_force=self._collision_force,
+            joint_force=self._joint_force,
+            torque_constraint_force=self._torque_constraint_force,
+            contact_margin=self._contact_margin,
+            x_semidim=self._x_semidim,
+            y_semidim=self._y_semidim,
+            broad_phase=self._broad_phase,
+        )
+
+    # ---------------------------------------------------------------------- step
+    def step(self) -> None:
+        """Advance every env by ``dt``: forces, contacts, joints, integration, messages."""
+        tables = self.tables
+        entities = self.entities
+        if not entities:
+            return
+        state = physics.BodyState(
+            pos=torch.stack([e.state._pos for e in entities], dim=1),
+            vel=torch.stack([e.state._vel for e in entities], dim=1),
+            rot=torch.stack([e.state._rot for e in entities], dim=1),
+            ang_vel=torch.stack([e.state._ang_vel for e in entities], dim=1),
+        )
+        force, torque = self._action_forces(tables, state)
+        fixed_rotation = None
+        if tables.joints is not None:
+            fixed_rotation = self._joint_fixed_rotations(tables)
+        new = physics.step(state, tables, self._step_params(), force, torque, fixed_rotation)
+        for e, pos, vel, rot, ang_vel in zip(
+            entities, new.pos.unbind(1), new.vel.unbind(1), new.rot.unbind(1), new.ang_vel.unbind(1)
+        ):
+            s = e.state
+            s._pos, s._vel, s._rot, s._ang_vel = pos, vel, rot, ang_vel
+        if self._dim_c > 0:
+            for agent in self._agents:
+                if not agent.silent and agent.action.c is not None:
+                    agent.state._c = agent.action.c
+
+    def _action_forces(self, tables: WorldTables, state: physics.BodyState) -> Tuple[Tensor, Tensor]:
+        """Agents' clamped action forces/torques scattered into per-entity tensors."""
+        n_agents = tables.n_agents
+        zeros_f = torch.zeros_like(state.pos)
+        zeros_t = torch.zeros_like(state.rot)
+        if n_agents == 0:
+            return zeros_f, zeros_t
+        agent_force = torch.stack([a.state._force for a in self._agents], dim=1)
+        agent_torque = torch.stack([a.state._torque for a in self._agents], dim=1)
+        agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
+        agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
+        agent_torque = physics.clamp_norm(agent_torque, tables.agent_max_t)
+        agent_torque = torch.maximum(torch.minimum(agent_torque, tables.agent_t_range), -tables.agent_t_range)
+        # clamped actions are visible to scenarios, as in VMAS
+        for agent, f, t in zip(self._agents, agent_force.unbind(1), agent_torque.unbind(1)):
+            if agent.movable:
+                agent.state._force = f
+            if agent.rotatable:
+                agent.state._torque = t
+        agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
+        agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
+        n_landmarks = tables.n_entities - n_agents
+        force = torch.cat([zeros_f[:, :n_landmarks], agent_force], dim=1)
+        torque = torch.cat([zeros_t[:, :n_landmarks], agent_torque], dim=1)
+        return force, torque
+
+    def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
+        """[B or 1, J, 1] target relative angles; tensors when a joint follows its line."""
+        values = []
+        for c in tables.joints.constraints:
+            value = c.fixed_rotation
+            if isinstance(value, Tensor):
+                values.append(value.reshape(-1, 1).to(self._device).expand(self._batch_dim, 1))
+            else:
+                values.append(torch.full((self._batch_dim, 1), float(value), device=self._device))
+        return torch.stack(values, dim=1)
+
+    # ------------------------------------------------------------------- queries
+    def _pick(self, value: Tensor, env_index) -> Tensor:
+        return value if env_index is None else value[env_index]
+
+    def get_distance_from_point(self, entity: Entity, test_point_pos: Tensor, env_index=None) -> Tensor:
+        """Distance from points [B, 2] to the entity's outline (negative inside a sphere)."""
+        shape, s = entity.shape, entity.state
+        if isinstance(shape, Sphere):
+            value = torch.linalg.vector_norm(s.pos - test_point_pos, dim=-1) - shape.radius
+        elif isinstance(shape, Box):
+            closest = geo.closest_point_on_box_boundary(s.pos, s.rot[..., 0], shape.length, shape.width, test_point_pos)
+            value = torch.linalg.vector_norm(test_point_pos - closest, dim=-1) - LINE_MIN_DIST
+        elif isinstance(shape, Line):
+            closest = geo.closest_point_on_segment(s.pos, s.rot[..., 0], shape.length, test_point_pos)
+            value = torch.linalg.vector_norm(test_point_pos - closest, dim=-1) - LINE_MIN_DIST
+        else:
+            raise TypeError(f"distance to {shape!r} is not supported")
+        return self._pick(value, env_index)
+
+    def get_distance(self, entity_a: Entity, entity_b: Entity, env_index=None) -> Tensor:
+        """Surface-to-surface distance per env (negative or -1 when overlapping)."""
+        a, b = entity_a, entity_b
+        kinds = {a.shape.kind, b.shape.kind}
+        if kinds == {"sphere"}:
+            value = self.get_distance_from_point(a, b.state.pos) - b.shape.radius
+        elif kinds in ({"box", "sphere"}, {"line", "sphere"}):
+            other, sphere = (a, b) if b.shape.kind == "sphere" else (b, a)
+            value = self.get_distance_from_point(other, sphere.state.pos) - sphere.shape.radius
+            if other.shape.kind == "box":
+                value = torch.where(self.is_overlapping(a, b), -1.0, value)
+        elif kinds == {"line"}:
+            pa, pb = geo.closest_points_segment_segment(
+                a.state.pos, a.state.rot[..., 0], a.shape.length, b.state.pos, b.state.rot[..., 0], b.shape.length
+            )
+            value = torch.linalg.vector_norm(pa - pb, dim=-1) - LINE_MIN_DIST
+        elif kinds == {"box", "line"}:
+            box, line = (a, b) if a.shape.kind == "box" else (b, a)
+            pa, pb = geo.closest_points_box_segment(
+                box.state.pos, box.state.rot[..., 0], box.shape.length, box.shape.width,
+                line.state.pos, line.state.rot[..., 0], line.shape.length,
+            )
+            value = torch.linalg.vector_norm(pa - pb, dim=-1) - LINE_MIN_DIST
+        elif kinds == {"box"}:
+            pa, pb = geo.closest_points_box_box(
+                a.state.pos, a.state.rot[..., 0], a.shape.length, a.shape.width,
+                b.state.pos, b.state.rot[..., 0], b.shape.length, b.shape.width,
+            )
+            value = torch.linalg.vector_norm(pa - pb, dim=-1) - LINE_MIN_DIST
+        else:
+            raise TypeError(f"distance between {a.shape!r} and {b.shape!r} is not supported")
+        return self._pick(value, env_index)
+
+    def is_overlapping(self, entity_a: Entity, entity_b: Entity, env_index=None) -> Tensor:
+        """Bool per env: do the two shapes touch (a sphere inside a solid box counts)?"""
+        if {entity_a.shape.kind, entity_b.shape.kind} == {"box", "sphere"}:
+            box, sphere = (entity_a, entity_b) if entity_a.shape.kind == "box" else (entity_b, entity_a)
+            closest = geo.closest_point_on_box_boundary(
+                box.state.pos, box.state.rot[..., 0], box.shape.length, box.shape.width, sphere.state.pos
+            )
+            inside = torch.linalg.vector_norm(sphere.state.pos - box.state.pos, dim=-1) < torch.linalg.vector_norm(
+                box.state.pos - closest, dim=-1
+            )
+            touching = torch.linalg.vector_norm(sphere.state.pos - closest, dim=-1) < sphere.shape.radius + LINE_MIN_DIST
+            return self._pick(inside | touching, env_index)
+        return self.get_distance(entity_a, entity_b, env_index) < 0
+
+    def cast_ray(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
+        """Distance [B] along one ray per env from ``entity`` to the nearest filtered entity."""
+        return self.cast_rays(entity, angles.unsqueeze(-1), max_range, entity_filter).squeeze(-1)
+
+    def cast_rays(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
+        """Distances [B, R] along rays at world ``angles`` [B, R]; ``max_range`` where nothing is hit."""
+        targets = [e for e in self.entities if e is not entity and entity_filter(e)]
+        for e in targets:
+            if not (e.collides(entity) and entity.collides(e)):
+                raise ValueError(f"rays are cast only among collidable entities: {entity.name!r} and {e.name!r} do not collide")
+        origin = entity.state.pos[:, None, None, :]  # [B, 1, 1, 2]
+        ray_angles = angles.unsqueeze(-1)  # [B, R, 1]
+        dists = [torch.full_like(angles, float(max_range))]
+        for kind in ("box", "sphere", "line"):
+            group = [e for e in targets if e.shape.kind == kind]
+            if not group:
+                continue
+            pos = torch.stack([e.state.pos for e in group], dim=1).unsqueeze(1)  # [B, 1, E, 2]
+            rot = torch.stack([e.state.rot[..., 0] for e in group], dim=1).unsqueeze(1)  # [B, 1, E]
+            if kind == "box":
+                length = torch.tensor([e.shape.length for e in group], device=self._device)
+                width = torch.tensor([e.shape.width for e in group], device=self._device)
+                d = raycast.ray_box(origin, ray_angles, pos, rot, length, width, max_range)
+            elif kind == "sphere":
+                radius = torch.tensor([e.shape.radius for e in group], device=self._device)
+                d = raycast.ray_sphere(origin, ray_angles, pos, radius, max_range)
+            else:
+                length = torch.tensor([e.shape.length for e in group], device=self._device)
+                d = raycast.ray_segment(origin, ray_angles, pos, rot, length, max_range)
+            dists.append(d.min(dim=-1).values)
+        return torch.stack(dists, dim=-1).min(dim=-1).values
