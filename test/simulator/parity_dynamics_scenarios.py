@@ -6,7 +6,11 @@ write) drives both the upstream oracle and our engine.
 """
 from __future__ import annotations
 
+import itertools
 import types
+from typing import Callable, Optional, Tuple
+
+import torch
 
 SOURCE = '''
 import torch
@@ -66,9 +70,9 @@ class DynamicsScenario(BaseScenario):
             controller = spec.pop("controller", None)
             spec.setdefault("shape", Sphere(radius=0.05))
             agent = Agent(name=name, collide=collide, **spec)
-            world.add_agent(agent)
-            if controller is not None:
+            if controller is not None:  # before add_agent, as VMAS's own scenarios do
                 agent.controller = VelocityController(agent, world, *controller)
+            world.add_agent(agent)
         world.add_landmark(Landmark(name="wall", shape=Box(length=0.1, width=1.0), collide=collide))
         return world
 
@@ -94,8 +98,95 @@ class DynamicsScenario(BaseScenario):
 '''
 
 
+FIELDS = ("pos", "vel", "rot", "ang_vel")
+ATOL = 1e-4
+
+
 def load(prefix: str) -> types.ModuleType:
     """The scenarios module compiled against ``prefix`` ("vmas" or "vmas_ros")."""
     module = types.ModuleType(f"parity_dynamics_scenarios_{prefix}")
     exec(compile(SOURCE.replace("PREFIX", prefix), module.__name__, "exec"), module.__dict__)
     return module
+
+
+UP = load("vmas")
+OURS = load("vmas_ros")
+
+
+def make_pair(device, batch: int = 16, **kwargs) -> Tuple[object, object]:
+    """The DynamicsScenario built on upstream VMAS and on vmas_ros, same kwargs."""
+    import vmas
+    import vmas_ros
+
+    up = vmas.make_env(UP.DynamicsScenario(), num_envs=batch, device=device, seed=0, **kwargs)
+    ours = vmas_ros.make_env(OURS.DynamicsScenario(), num_envs=batch, device=device, seed=0, **kwargs)
+    return up, ours
+
+
+def copy_random_state(up, ours, seed: int, spread: float = 0.6) -> None:
+    """Write one random initial state (agents only, moving) into both worlds."""
+    gen = torch.Generator().manual_seed(seed)
+    batch = up.world.batch_dim
+    for e_up, e_ours in zip(up.world.agents, ours.world.agents):
+        values = {
+            "pos": (torch.rand(batch, 2, generator=gen) * 2 - 1) * spread,
+            "vel": (torch.rand(batch, 2, generator=gen) * 2 - 1) * 0.3,
+            "rot": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 3.0,
+            "ang_vel": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 0.5,
+        }
+        for field, value in values.items():
+            getattr(e_up, f"set_{field}")(value.to(up.device), batch_index=None)
+            getattr(e_ours, f"set_{field}")(value.to(ours.device), batch_index=None)
+
+
+def assert_same(up, ours, step: int) -> None:
+    """Positions within 1e-4; other fields 1e-4 absolute plus 1e-4 relative."""
+    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
+        assert e_up.name == e_ours.name
+        for field in FIELDS:
+            expected, actual = getattr(e_up.state, field), getattr(e_ours.state, field)
+            assert actual.device == expected.device
+            torch.testing.assert_close(
+                actual, expected, atol=ATOL, rtol=0 if field == "pos" else 1e-4,
+                msg=lambda m: f"step {step}, {e_ours.name}.{field}: {m}",
+            )
+    for a_up, a_ours in zip(up.world.agents, ours.world.agents):
+        if hasattr(a_up, "controller"):
+            for name in ("accum_errs", "prev_err"):
+                torch.testing.assert_close(
+                    getattr(a_ours.controller, name), getattr(a_up.controller, name), atol=ATOL, rtol=1e-4,
+                    msg=lambda m: f"step {step}, {a_ours.name}.controller.{name}: {m}",
+                )
+
+
+def run_parity(
+    up, ours, seed: int, steps: int = 50, hold: int = 5,
+    on_step: Optional[Callable[[int], None]] = None,
+) -> None:
+    """Step both envs with identical random actions (each held ``hold`` steps).
+
+    Holding actions lets velocity errors build up, so integrators and their
+    anti-windup clip are exercised, and lets kinematic agents trace real arcs.
+    """
+    gen = torch.Generator().manual_seed(seed)
+    assert_same(up, ours, 0)
+    actions = None
+    for step in range(1, steps + 1):
+        if (step - 1) % hold == 0:
+            actions = [
+                (torch.rand(up.world.batch_dim, up.get_agent_action_size(a), generator=gen) * 2 - 1)
+                * a.action.u_range_tensor.cpu()
+                for a in up.agents
+            ]
+        obs_up, rew_up, _, _ = up.step([a.to(up.device) for a in actions])
+        obs_ours, rew_ours, _, _ = ours.step([a.to(ours.device) for a in actions])
+        assert_same(up, ours, step)
+        for o_up, o_ours in zip(obs_up + rew_up, obs_ours + rew_ours):
+            torch.testing.assert_close(o_ours, o_up, atol=ATOL, rtol=1e-4)
+        if on_step is not None:
+            on_step(step)
+
+
+def any_contact(world) -> bool:
+    """Whether some pair of entities overlaps in some env (guards against vacuous parity)."""
+    return any(bool((world.get_distance(a, b) < 0).any()) for a, b in itertools.combinations(world.entities, 2))

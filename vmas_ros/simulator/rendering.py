@@ -10,7 +10,7 @@ Semantics kept from VMAS because scenarios rely on them:
 * Attributes (:class:`Transform`, :class:`Color`, :class:`LineWidth`) attach
   with ``add_attr``; the transform added *first* acts on the vertices first
   (innermost), later ones wrap it.
-* A :class:`Compound` paints every child with its own colour.
+* A :class:`Compound` paints every child in the compound's colour.
 * Line widths and :class:`TextLine` coordinates/sizes are in pixels; everything
   else is in world units. Text lines are drawn last, in window pixels measured
   from the bottom-left corner.
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Callable, Iterable, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -182,35 +182,37 @@ class FilledPolygon(Geom):
             canvas.polygon(pts, outline=tuple(c * 0.5 for c in ctx.color), width=ctx.line_width or _BORDER_WIDTH)
 
 
-class PolyLine(Geom):
-    """A stroked chain of vertices, closed into a loop when ``close``."""
+class _Stroked(Geom):
+    """A geom drawn with lines, owning a :class:`LineWidth` (pixels) from the start."""
 
-    def __init__(self, v, close):
+    def __init__(self, width: float = 1):
         super().__init__()
-        self.v = v
-        self.close = close
-        self.linewidth = LineWidth(1)
-        self.add_attr(self.linewidth)
-
-    def set_linewidth(self, x) -> None:
-        self.linewidth.stroke = x
-
-    def _paint(self, canvas: "Canvas", ctx: DrawContext) -> None:
-        canvas.polyline(ctx.apply(_points(self.v)), ctx.color, ctx.line_width or 1.0, closed=bool(self.close))
-
-
-class Line(Geom):
-    """A segment from ``start`` to ``end``; ``width`` in pixels."""
-
-    def __init__(self, start=(0.0, 0.0), end=(0.0, 0.0), width: float = 1):
-        super().__init__()
-        self.start = start
-        self.end = end
         self.linewidth = LineWidth(width)
         self.add_attr(self.linewidth)
 
     def set_linewidth(self, x) -> None:
         self.linewidth.stroke = x
+
+
+class PolyLine(_Stroked):
+    """A stroked chain of vertices, closed into a loop when ``close``."""
+
+    def __init__(self, v, close):
+        super().__init__(1)
+        self.v = v
+        self.close = close
+
+    def _paint(self, canvas: "Canvas", ctx: DrawContext) -> None:
+        canvas.polyline(ctx.apply(_points(self.v)), ctx.color, ctx.line_width or 1.0, closed=bool(self.close))
+
+
+class Line(_Stroked):
+    """A segment from ``start`` to ``end``; ``width`` in pixels."""
+
+    def __init__(self, start=(0.0, 0.0), end=(0.0, 0.0), width: float = 1):
+        super().__init__(width)
+        self.start = start
+        self.end = end
 
     def _paint(self, canvas: "Canvas", ctx: DrawContext) -> None:
         pts = ctx.apply(np.concatenate([_points(self.start), _points(self.end)]))
@@ -280,18 +282,13 @@ class Image(Geom):
         canvas.image(self.img, (min(xa, xb), max(xa, xb)), (min(ya, yb), max(ya, yb)))
 
 
-class Grid(Geom):
+class Grid(_Stroked):
     """Evenly spaced horizontal and vertical lines over a ``length``-wide square."""
 
     def __init__(self, spacing: float = 0.1, length: float = 50, width: float = 0.5):
-        super().__init__()
+        super().__init__(width)
         self.spacing = spacing
         self.length = length
-        self.linewidth = LineWidth(width)
-        self.add_attr(self.linewidth)
-
-    def set_linewidth(self, x) -> None:
-        self.linewidth.stroke = x
 
     def _paint(self, canvas: "Canvas", ctx: DrawContext) -> None:
         half = self.length / 2
@@ -301,7 +298,9 @@ class Grid(Geom):
 
 
 # ---------------------------------------------------------------- factories
-def make_ellipse(radius_x=10, radius_y=5, res=30, filled=True, angle=2 * math.pi) -> Geom:
+def make_ellipse(
+    radius_x: float = 10, radius_y: float = 5, res: int = 30, filled: bool = True, angle: float = 2 * math.pi
+) -> Geom:
     """An ellipse (or a sector of ``angle`` radians centred on +x) as ``res`` vertices."""
     ts = -angle / 2 + angle * np.arange(res) / res
     pts = [(math.cos(t) * radius_x, math.sin(t) * radius_y) for t in ts.tolist()]
@@ -310,12 +309,12 @@ def make_ellipse(radius_x=10, radius_y=5, res=30, filled=True, angle=2 * math.pi
     return FilledPolygon(pts) if filled else PolyLine(pts, True)
 
 
-def make_circle(radius=10, res=30, filled=True, angle=2 * math.pi) -> Geom:
+def make_circle(radius: float = 10, res: int = 30, filled: bool = True, angle: float = 2 * math.pi) -> Geom:
     """A circle of ``radius`` centred at the origin (see :func:`make_ellipse`)."""
     return make_ellipse(radius_x=radius, radius_y=radius, res=res, filled=filled, angle=angle)
 
 
-def make_polygon(v, filled=True, draw_border: float = True) -> Geom:
+def make_polygon(v, filled: bool = True, draw_border: float = True) -> Geom:
     """A filled polygon, or its closed outline when not ``filled``."""
     return FilledPolygon(v, draw_border=draw_border) if filled else PolyLine(v, True)
 
@@ -325,7 +324,7 @@ def make_polyline(v) -> Geom:
     return PolyLine(v, False)
 
 
-def make_capsule(length, width) -> Geom:
+def make_capsule(length: float, width: float) -> Geom:
     """A stadium from ``x=0`` to ``x=length`` with round caps of diameter ``width``."""
     body = make_polygon([(0, -width / 2), (0, width / 2), (length, width / 2), (length, -width / 2)])
     tail = make_circle(width / 2)

@@ -66,34 +66,37 @@ def view_bounds(
     zoom: float = 1.2,
     shared_viewer: bool = True,
     agent_index_focus: Optional[int] = None,
+    render_origin: Sequence[float] = (0.0, 0.0),
 ) -> Bounds:
     """The ``(xmin, xmax, ymin, ymax)`` VMAS would show for this frame.
 
     The camera's half-extent on the shorter image side starts at ``zoom``
     (the other side follows the aspect ratio). With a shared viewer VMAS then
     scales it by ``max(zoom, fit / half_extent)`` where ``fit`` is the largest
-    ``|pos|`` of any agent plus twice the biggest agent radius, so every agent
-    stays in view. Note that this multiplies by ``zoom`` a second time: with
+    ``|pos - render_origin|`` of any agent plus twice the biggest agent
+    radius, so every agent stays in view. Note that this multiplies by ``zoom`` a second time: with
     everybody near the origin the half-extent is ``zoom**2``. We keep that so
     frames match upstream's. With ``agent_index_focus`` the camera follows
-    that agent at the base half-extent; with neither it stays at the origin.
+    that agent at the base half-extent; with neither it stays on
+    ``render_origin`` (VMAS's ``Scenario.render_origin``).
     """
     if zoom <= 0:
         raise ValueError(f"zoom must be > 0, got {zoom}")
     aspect = width / height
     half = np.array([zoom * aspect, zoom] if aspect >= 1 else [zoom, zoom / aspect], dtype=np.float64)
     agents = list(getattr(world, "agents", []))
+    origin = np.array([float(render_origin[0]), float(render_origin[1])])
     if agent_index_focus is not None:
         cx, cy = _vec(agents[agent_index_focus].state.pos, env_index)[:2]
         return (cx - half[0], cx + half[0], cy - half[1], cy + half[1])
     if shared_viewer:
         if agents:
             pos = np.stack([_vec(a.state.pos, env_index)[:2] for a in agents])
-            fit = np.abs(pos).max(axis=0) + 2 * max(_radius(a) for a in agents)
+            fit = np.abs(pos - origin).max(axis=0) + 2 * max(_radius(a) for a in agents)
             half = half * max(zoom, float((fit / half).max()))
         else:
             half = half * zoom
-    return (-half[0], half[0], -half[1], half[1])
+    return (origin[0] - half[0], origin[0] + half[0], origin[1] - half[1], origin[1] + half[1])
 
 
 def bounds_geoms(world) -> List[Geom]:
@@ -133,7 +136,7 @@ def entity_geoms(entity, env_index: int = 0) -> List[Geom]:
         xform.set_rotation(_vec(rot, env_index)[0])
     geom.add_attr(xform)
     color = _color(entity, env_index)
-    alpha = getattr(entity, "alpha", 1.0)
+    alpha = getattr(entity, "alpha", getattr(entity, "_alpha", 1.0))  # _alpha: upstream agents
     geom.set_color(*color, alpha=float(alpha))
     geoms = [geom]
     force = getattr(entity.state, "force", None)
@@ -188,26 +191,36 @@ def render_world(
     visible_bounds: Optional[Sequence[float]] = None,
     plot_bounds: bool = True,
     agent_index_focus: Optional[int] = None,
+    render_origin: Sequence[float] = (0.0, 0.0),
+    extra_on_top: bool = False,
 ) -> np.ndarray:
     """Draw environment ``env_index`` of ``world``; returns ``[height, width, 3]`` uint8.
 
-    Order, bottom to top: world bounds (if ``plot_bounds``), entities in
-    ``world.entities`` order, agents' sensors, communication labels, then
-    ``extra_geoms`` (a scenario's ``extra_render(env_index)``); any
-    :class:`~vmas_ros.simulator.rendering.TextLine` goes last. The view is
-    ``visible_bounds=(xmin, xmax, ymin, ymax)`` if given, else
-    :func:`view_bounds`.
+    Order, bottom to top: world bounds (if ``plot_bounds``), ``extra_geoms``
+    (a scenario's ``extra_render(env_index)``), entities in ``world.entities``
+    order, agents' sensors, communication labels; any
+    :class:`~vmas_ros.simulator.rendering.TextLine` goes last. Extra geoms go
+    *under* the entities because that is VMAS's order and scenarios rely on
+    it (football paints its pitch in ``extra_render``); ``extra_on_top=True``
+    puts them above entities and sensors instead, for overlays.
+
+    The view is ``visible_bounds=(xmin, xmax, ymin, ymax)`` if given, else
+    :func:`view_bounds` (``zoom`` is VMAS's ``Scenario.viewer_zoom``,
+    ``render_origin`` its ``Scenario.render_origin``).
     """
     if visible_bounds is not None:
         xmin, xmax, ymin, ymax = (float(v) for v in visible_bounds)
     else:
         xmin, xmax, ymin, ymax = view_bounds(
-            world, env_index, width, height, zoom, shared_viewer, agent_index_focus
+            world, env_index, width, height, zoom, shared_viewer, agent_index_focus, render_origin
         )
     viewer = Viewer(width, height)
     viewer.set_bounds(xmin, xmax, ymin, ymax)
     if plot_bounds:
         viewer.add_onetime_list(bounds_geoms(world))
+    extra_geoms = list(extra_geoms)
+    if not extra_on_top:
+        viewer.add_onetime_list(extra_geoms)
     for entity in world.entities:
         viewer.add_onetime_list(entity_geoms(entity, env_index))
     for agent in getattr(world, "agents", []):
@@ -215,6 +228,7 @@ def render_world(
             continue
         for sensor in getattr(agent, "sensors", None) or []:
             viewer.add_onetime_list(sensor.render(env_index=env_index))
+    if extra_on_top:
+        viewer.add_onetime_list(extra_geoms)
     viewer.add_onetime_list(comm_geoms(world, env_index))
-    viewer.add_onetime_list(extra_geoms)
     return viewer.render(return_rgb_array=True)

@@ -21,14 +21,17 @@ acceleration per velocity error and transfer across agents of different mass.
 """
 from __future__ import annotations
 
-import math
 import warnings
-from typing import Optional, Sequence, Union
+from typing import TYPE_CHECKING, Optional, Sequence, Union
 
 import torch
 from torch import Tensor
 
 from vmas_ros.simulator.utils import TorchUtils
+
+if TYPE_CHECKING:  # runtime import would be circular-prone and is not needed
+    from vmas_ros.simulator.entities import Agent
+    from vmas_ros.simulator.world import World
 
 __all__ = ["VelocityController"]
 
@@ -39,16 +42,19 @@ class VelocityController:
     State (integrated error and last error, [batch, dim_p]) is kept per env so
     that ``reset(index)`` can clear only the envs being reset.
 
-    Anti-windup: when the agent has a force limit ``fmax = min(max_f, f_range)``
-    the integrated error is clipped so the integral term alone never asks for
-    more than half of ``fmax``; without a limit a warning is issued since the
-    integrator can then grow without bound while the agent is blocked.
+    Anti-windup: a blocked or force-saturated agent keeps accumulating error,
+    and the stored integral would later make it overshoot for a long time. When
+    the agent has a force limit ``fmax = min(max_f, f_range)`` the accumulated
+    error is therefore clipped to ``+/- 0.5 * fmax * intg_ts / (dt * gain)``
+    per axis (VMAS 1.5's bound, which it describes as 50% of the force limit;
+    the integral force it allows is ``0.5 * fmax * mass / dt``). Without a
+    limit a warning is issued, since the integrator can then grow unbounded.
     """
 
     def __init__(
         self,
-        agent,
-        world,
+        agent: "Agent",
+        world: "World",
         ctrl_params: Sequence[float] = (1, 0, 0),
         pid_form: str = "standard",
     ) -> None:
@@ -71,7 +77,6 @@ class VelocityController:
             limits = [f for f in (agent.max_f, agent.f_range) if f is not None]
             if limits:
                 fmax = min(limits)
-                # |integral term| = gain * accum / intg_ts <= 0.5 * fmax  (per unit mass, as VMAS)
                 self.integrator_windup_cutoff = 0.5 * fmax * self.integralTs / (self.dt * self.ctrl_gain)
             else:
                 warnings.warn(
@@ -116,11 +121,11 @@ class VelocityController:
         cutoff = self.integrator_windup_cutoff
         if cutoff is not None:
             self.accum_errs = self.accum_errs.clamp(-cutoff, cutoff)
-        return self.accum_errs / self.integralTs
+        return (1.0 / self.integralTs) * self.accum_errs
 
     def rateError(self, err: Tensor) -> Tensor:
         """Derivative term ``derv_ts * de/dt``; remembers ``err`` for the next step."""
-        rate = (err - self.prev_err) * (self.derivativeTs / self.dt)
+        rate = self.derivativeTs * (err - self.prev_err) / self.dt
         self.prev_err = err
         return rate
 
@@ -135,6 +140,7 @@ class VelocityController:
         dim_p = self.world.dim_p
         err = u[:, :dim_p] - agent.state.vel
         pid = err + self.integralError(err) + self.rateError(err)
-        force = pid * (self.ctrl_gain * agent.mass)
+        # ideal (ISA) PID form K * (e + I + D), scaled by mass to get a force
+        force = self.ctrl_gain * pid * agent.mass
         # columns beyond (vx, vy), e.g. a torque for HolonomicWithRotation, pass through
         agent.action.u = force if u.shape[1] == dim_p else torch.cat((force, u[:, dim_p:]), dim=-1)

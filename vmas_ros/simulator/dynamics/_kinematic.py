@@ -12,12 +12,15 @@ so the agent follows the model while still colliding like any other body.
 """
 from __future__ import annotations
 
-from typing import Tuple
+from typing import TYPE_CHECKING, Tuple
 
 import torch
 from torch import Tensor
 
 from vmas_ros.simulator.dynamics.common import Dynamics
+
+if TYPE_CHECKING:
+    from vmas_ros.simulator.world import World
 
 _INTEGRATIONS = ("euler", "rk4")
 
@@ -30,7 +33,7 @@ class KinematicDynamics(Dynamics):
     arguments ``f`` expects. Commands are held constant over the step.
     """
 
-    def __init__(self, world, integration: str) -> None:
+    def __init__(self, world: "World", integration: str) -> None:
         super().__init__()
         if integration not in _INTEGRATIONS:
             raise ValueError(f"integration must be one of {_INTEGRATIONS}, got {integration!r}")

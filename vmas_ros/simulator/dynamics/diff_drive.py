@@ -6,12 +6,15 @@ describes, which is why it is the usual choice for real ground robots.
 """
 from __future__ import annotations
 
-from typing import Tuple
+from typing import TYPE_CHECKING, Tuple
 
 import torch
 from torch import Tensor
 
 from vmas_ros.simulator.dynamics._kinematic import KinematicDynamics
+
+if TYPE_CHECKING:
+    from vmas_ros.simulator.world import World
 
 
 class DiffDrive(KinematicDynamics):
@@ -23,7 +26,7 @@ class DiffDrive(KinematicDynamics):
         integration: ``"rk4"`` (default, accurate on arcs) or ``"euler"``.
     """
 
-    def __init__(self, world, integration: str = "rk4") -> None:
+    def __init__(self, world: "World", integration: str = "rk4") -> None:
         super().__init__(world, integration)
 
     @property

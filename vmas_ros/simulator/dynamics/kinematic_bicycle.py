@@ -8,12 +8,15 @@ centre of gravity moves at slip angle ``beta`` relative to the heading, with
 """
 from __future__ import annotations
 
-from typing import Tuple
+from typing import TYPE_CHECKING, Tuple
 
 import torch
 from torch import Tensor
 
 from vmas_ros.simulator.dynamics._kinematic import KinematicDynamics
+
+if TYPE_CHECKING:
+    from vmas_ros.simulator.world import World
 
 
 class KinematicBicycle(KinematicDynamics):
@@ -31,7 +34,7 @@ class KinematicBicycle(KinematicDynamics):
 
     def __init__(
         self,
-        world,
+        world: "World",
         width: float,
         l_f: float,
         l_r: float,
@@ -60,13 +63,16 @@ class KinematicBicycle(KinematicDynamics):
         """d(x, y, theta)/dt of the centre of gravity for speed and steering angle."""
         wheelbase = self.l_f + self.l_r
         tan_steer = torch.tan(steering_command)
-        beta = torch.atan(tan_steer * (self.l_r / wheelbase))
+        # atan2(y, 1) == atan(y) mathematically; it is used (and the products below
+        # are ordered) to round exactly like VMAS, so float32 trajectories stay
+        # comparable through contacts, which amplify last-bit differences
+        beta = torch.atan2(tan_steer * self.l_r / wheelbase, torch.ones_like(tan_steer))
         heading = state[:, 2] + beta
         return torch.stack(
             (
                 v_command * torch.cos(heading),
                 v_command * torch.sin(heading),
-                v_command * torch.cos(beta) * tan_steer / wheelbase,
+                v_command / wheelbase * torch.cos(beta) * tan_steer,
             ),
             dim=-1,
         )
