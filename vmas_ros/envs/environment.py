@@ -187,13 +187,18 @@ class Environment:
             if not self.grad_enabled:
                 action = action.detach()
             low, high = self._action_bounds(agent)
-            if self.clamp_action and self.continuous_actions:
-                action = torch.maximum(torch.minimum(action.float(), high), low)
             tensors.append(action)
             lows.append(low)
             highs.append(high)
             names.append(agent.name)
-        act.check_finite_and_range(tensors, lows, highs, names, "continuous" if self.continuous_actions else "discrete")
+        kind = "continuous" if self.continuous_actions else "discrete"
+        if self.clamp_action and self.continuous_actions:
+            # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
+            unbounded = [torch.full_like(low, float("inf")) for low in lows]
+            act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, names, kind)
+            tensors = [torch.maximum(torch.minimum(a.float(), high), low) for a, low, high in zip(tensors, lows, highs)]
+        else:
+            act.check_finite_and_range(tensors, lows, highs, names, kind)
         for agent, action in zip(self.agents, tensors):
             self._apply_action(agent, action)
 
@@ -336,7 +341,8 @@ class Environment:
         return render_world(
             self.world, env_index=env_index, extra_geoms=extra,
             width=self.scenario.viewer_size[0], height=self.scenario.viewer_size[1],
-            zoom=self.scenario.viewer_zoom, plot_bounds=self.scenario.visualize_semidims, **kwargs,
+            zoom=self.scenario.viewer_zoom, plot_bounds=self.scenario.visualize_semidims,
+            render_origin=self.scenario.render_origin, **kwargs,
         )
 
     def to(self, device) -> None:

@@ -24,11 +24,13 @@ def list_scenarios() -> List[str]:
 
 
 def _module(name: str):
+    if isinstance(name, str):
+        name = name.removesuffix(".py")  # VMAS accepts "simple_spread.py" too
     if not isinstance(name, str) or name not in REGISTRY:
         close = difflib.get_close_matches(str(name), REGISTRY, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise ValueError(f"unknown scenario {name!r}{hint}; valid scenarios: {', '.join(list_scenarios())}")
-    return importlib.import_module(REGISTRY[name.removesuffix('.py')])
+    return importlib.import_module(REGISTRY[name])
 
 
 def load(name: str):

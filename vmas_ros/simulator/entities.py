@@ -387,7 +387,7 @@ class Entity(_Batched, Observable):
                 setattr(self._state, name, value.reshape(1, -1).repeat(self._batch_dim, 1))
         else:
             getattr(self._state, name)[batch_index] = value
-        self.notify_observers()
+        self.notify_observers(batch_index=batch_index)
 
     def set_pos(self, pos: Tensor, batch_index) -> None:
         """Set the position of all envs (``batch_index=None``) or of the selected ones."""

@@ -135,15 +135,33 @@ class Joint(Observer):
             return
         if self.entity_a.state.pos is None or self.entity_b.state.pos is None:
             return
+        # only the envs whose end moved are touched (VMAS re-places the rod in every env,
+        # which made reset_at of some envs nudge the rods of all the others)
+        batch_index = kwargs.get("batch_index")
         start = self.joint_constraints[0].pos_point(self.entity_a)
         end = self.joint_constraints[1].pos_point(self.entity_b)
-        self.landmark.set_pos((start + end) / 2, batch_index=None)
         angle = torch.atan2(end[:, Y] - start[:, Y], end[:, X] - start[:, X]).unsqueeze(-1)
-        self.landmark.set_rot(angle, batch_index=None)
-        if not self.rotate_a and self.fixed_rotation_a is None:
-            self.joint_constraints[0].fixed_rotation = angle - self.entity_a.state.rot
-        if not self.rotate_b and self.fixed_rotation_b is None:
-            self.joint_constraints[1].fixed_rotation = angle - self.entity_b.state.rot
+        mid = (start + end) / 2
+        if batch_index is None:
+            self.landmark.set_pos(mid, batch_index=None)
+            self.landmark.set_rot(angle, batch_index=None)
+        else:
+            self.landmark.set_pos(mid[batch_index], batch_index=batch_index)
+            self.landmark.set_rot(angle[batch_index], batch_index=batch_index)
+        for constraint, entity, rotate, fixed in (
+            (self.joint_constraints[0], self.entity_a, self.rotate_a, self.fixed_rotation_a),
+            (self.joint_constraints[1], self.entity_b, self.rotate_b, self.fixed_rotation_b),
+        ):
+            if rotate or fixed is not None:
+                continue
+            target = angle - entity.state.rot
+            previous = constraint.fixed_rotation
+            if batch_index is None or not isinstance(previous, torch.Tensor):
+                constraint.fixed_rotation = target
+            else:
+                updated = previous.clone()
+                updated[batch_index] = target[batch_index]
+                constraint.fixed_rotation = updated
 
     def render(self, env_index: int = 0) -> list:
         return []
