@@ -105,7 +105,9 @@ def pair_forces(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[
     ``params.broad_phase == "batch"`` keeps a pair in *every* env as soon as it is
     near in *any* env, which is what VMAS 1.5 does (bit-for-bit parity, but an
     env can then feel its neighbours in the batch); ``"env"`` decides per env,
-    so each env evolves exactly as it would alone. Neither reads back to the host.
+    so no env depends on the others (bit-identical at equal batch size; across
+    batch sizes torch's float32 kernels may round one ulp differently). Neither
+    mode reads back to the host.
     """
     forces = _pair_contact(pair, state, params)
     gap = torch.linalg.vector_norm(state.pos[:, pair.index_a] - state.pos[:, pair.index_b], dim=-1)
