@@ -12,6 +12,8 @@ from typing import Callable, Optional, Tuple
 
 import torch
 
+from test.simulator import parity
+
 SOURCE = '''
 import torch
 from PREFIX.simulator.controllers.velocity_controller import VelocityController
@@ -98,8 +100,8 @@ class DynamicsScenario(BaseScenario):
 '''
 
 
-FIELDS = ("pos", "vel", "rot", "ang_vel")
-ATOL = 1e-4
+FIELDS = parity.FIELDS
+ATOL = parity.ATOL
 
 
 def load(prefix: str) -> types.ModuleType:
@@ -125,31 +127,12 @@ def make_pair(device, batch: int = 16, **kwargs) -> Tuple[object, object]:
 
 def copy_random_state(up, ours, seed: int, spread: float = 0.6) -> None:
     """Write one random initial state (agents only, moving) into both worlds."""
-    gen = torch.Generator().manual_seed(seed)
-    batch = up.world.batch_dim
-    for e_up, e_ours in zip(up.world.agents, ours.world.agents):
-        values = {
-            "pos": (torch.rand(batch, 2, generator=gen) * 2 - 1) * spread,
-            "vel": (torch.rand(batch, 2, generator=gen) * 2 - 1) * 0.3,
-            "rot": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 3.0,
-            "ang_vel": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 0.5,
-        }
-        for field, value in values.items():
-            getattr(e_up, f"set_{field}")(value.to(up.device), batch_index=None)
-            getattr(e_ours, f"set_{field}")(value.to(ours.device), batch_index=None)
+    parity.copy_random_state(up, ours, seed, spread, agents_only=True)
 
 
 def assert_same(up, ours, step: int) -> None:
-    """Positions within 1e-4; other fields 1e-4 absolute plus 1e-4 relative."""
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        assert e_up.name == e_ours.name
-        for field in FIELDS:
-            expected, actual = getattr(e_up.state, field), getattr(e_ours.state, field)
-            assert actual.device == expected.device
-            torch.testing.assert_close(
-                actual, expected, atol=ATOL, rtol=0 if field == "pos" else 1e-4,
-                msg=lambda m: f"step {step}, {e_ours.name}.{field}: {m}",
-            )
+    """Entity states as in every parity test, plus the PID controllers' memory."""
+    parity.assert_same_state(up, ours, step)
     for a_up, a_ours in zip(up.world.agents, ours.world.agents):
         if hasattr(a_up, "controller"):
             for name in ("accum_errs", "prev_err"):

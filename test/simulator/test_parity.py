@@ -14,14 +14,14 @@ import torch
 
 import vmas
 import vmas_ros
-from test.simulator import parity_scenarios
+from test.simulator import parity, parity_scenarios
 
 UP = parity_scenarios.load("vmas")
 OURS = parity_scenarios.load("vmas_ros")
 STEPS = 50
 ATOL = 1e-4
 BATCH = 16
-FIELDS = ("pos", "vel", "rot", "ang_vel")
+FIELDS = parity.FIELDS
 
 
 def _make_pair(name: str, **kwargs):
@@ -31,31 +31,10 @@ def _make_pair(name: str, **kwargs):
 
 
 def _randomize(up, ours, seed: int, spread: float = 0.35) -> None:
-    """Write one random, contact-rich initial state into both worlds."""
-    gen = torch.Generator().manual_seed(seed)
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        values = {
-            "pos": (torch.rand(BATCH, 2, generator=gen) * 2 - 1) * spread,
-            "vel": (torch.rand(BATCH, 2, generator=gen) * 2 - 1) * 0.3,
-            "rot": (torch.rand(BATCH, 1, generator=gen) * 2 - 1) * 3.0,
-            "ang_vel": (torch.rand(BATCH, 1, generator=gen) * 2 - 1) * 0.5,
-        }
-        for field, value in values.items():
-            getattr(e_up, f"set_{field}")(value.clone(), batch_index=None)
-            getattr(e_ours, f"set_{field}")(value.clone(), batch_index=None)
+    parity.copy_random_state(up, ours, seed, spread)
 
 
-def _assert_same_state(up, ours, step: int) -> None:
-    assert [e.name for e in up.world.entities] == [e.name for e in ours.world.entities]
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        for field in FIELDS:
-            expected, actual = getattr(e_up.state, field), getattr(e_ours.state, field)
-            assert torch.isfinite(actual).all(), f"{e_ours.name}.{field} not finite at step {step}"
-            # positions must agree to 1e-4; derivatives may carry float32 rounding relative to their size
-            torch.testing.assert_close(
-                actual, expected, atol=ATOL, rtol=0 if field == "pos" else 1e-4,
-                msg=lambda m: f"step {step}, {e_ours.name}.{field}: {m}",
-            )
+_assert_same_state = parity.assert_same_state
 
 
 def _run(up, ours, seed: int, steps: int = STEPS) -> float:

@@ -1,7 +1,7 @@
-"""First-principles physics of the engine: every expected value is derived by hand.
+"""First-principles physics of the engine: free motion, contacts, torques and limits.
 
-Each test builds a tiny World (one to three entities), steps it directly and
-compares with a closed form or a conservation law. Parity with upstream VMAS
+Every expected value is derived by hand: each test builds a tiny World, steps it
+and compares with a closed form or a conservation law. Parity with upstream VMAS
 is covered by test_parity.py; here the oracle is the physics itself.
 """
 from __future__ import annotations
@@ -11,57 +11,19 @@ import math
 import pytest
 import torch
 
+from test.simulator.physics_helpers import (
+    DT,
+    T,
+    all_finite,
+    angular_momentum,
+    body,
+    make_shape,
+    momentum,
+    place,
+)
 from vmas_ros.simulator import physics
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
-from vmas_ros.simulator.joints import Joint
-from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import LINE_MIN_DIST
-
-DT = 0.1
-
-
-def T(values, device):
-    return torch.tensor(values, dtype=torch.float32, device=device)
-
-
-def place(entity, device, pos=(0.0, 0.0), vel=(0.0, 0.0), rot=0.0, ang_vel=0.0):
-    """Write one state into every env of the entity's world."""
-    entity.set_pos(T(pos, device), batch_index=None)
-    entity.set_vel(T(vel, device), batch_index=None)
-    entity.set_rot(T([rot], device), batch_index=None)
-    entity.set_ang_vel(T([ang_vel], device), batch_index=None)
-
-
-def body(name, shape, mass=1.0, movable=True, rotatable=True, **kwargs):
-    return Landmark(name=name, shape=shape, movable=movable, rotatable=rotatable, mass=mass, collide=True, **kwargs)
-
-
-def make_shape(kind):
-    return {
-        "sphere": lambda: Sphere(radius=0.1),
-        "box": lambda: Box(length=0.3, width=0.2),
-        "line": lambda: Line(length=0.4),
-    }[kind]()
-
-
-def momentum(entities):
-    return sum(e.mass * e.state.vel for e in entities)
-
-
-def angular_momentum(entities):
-    """About the world origin: sum of m (r x v) + I w, per env [B]."""
-    total = 0.0
-    for e in entities:
-        r, v = e.state.pos, e.state.vel
-        total = total + e.mass * (r[:, 0] * v[:, 1] - r[:, 1] * v[:, 0]) + e.moment_of_inertia * e.state.ang_vel[:, 0]
-    return total
-
-
-def all_finite(world):
-    return all(
-        bool(torch.isfinite(getattr(e.state, f)).all()) for e in world.entities for f in ("pos", "vel", "rot", "ang_vel")
-    )
-
 
 # --------------------------------------------------------------------- free motion
 
@@ -331,181 +293,6 @@ def test_box_pushed_off_centre_rotates(device, offset, expected_sign):
         assert w * expected_sign > 1e-2, f"box should spin with sign {expected_sign}, got {w}"
 
 
-# ------------------------------------------------------------------------- joints
-
-
-def _jointed_pair(device, dist, anchor_a=(0.0, 0.0), anchor_b=(0.0, 0.0)):
-    world = World(batch_dim=1, device=device, dt=DT, substeps=5, drag=0.25)
-    a = Agent("a", shape=Sphere(0.05), rotatable=True)
-    b = Agent("b", shape=Sphere(0.05), rotatable=True)
-    world.add_agent(a)
-    world.add_agent(b)
-    world.add_joint(Joint(a, b, anchor_a=anchor_a, anchor_b=anchor_b, dist=dist))
-    gap = dist + a.shape.get_delta_from_anchor(anchor_a)[0] - b.shape.get_delta_from_anchor(anchor_b)[0]
-    a.set_pos(T([-gap / 2, 0.0], device), batch_index=None)
-    b.set_pos(T([gap / 2, 0.0], device), batch_index=None)
-    return world, a, b
-
-
-def _anchor_gap(world, a, b):
-    constraint_a = world.joints[0] if len(world.joints) == 1 else None
-    if constraint_a is not None:
-        return (constraint_a.pos_point(a) - constraint_a.pos_point(b)).norm(dim=-1)
-    rod_a, rod_b = world.joints
-    return (rod_a.pos_point(a) - rod_b.pos_point(b)).norm(dim=-1)
-
-
-@pytest.mark.parametrize("direction", [1.0, -1.0], ids=["pulled-apart", "pushed-together"])
-def test_rod_joint_holds_its_length(device, direction):
-    d, pull = 0.5, 0.5
-    world, a, b = _jointed_pair(device, d)
-    assert len(world.landmarks) == 1 and world.landmarks[0].shape.length == d
-    gaps = []
-    for step in range(200):
-        # opposite actions along the rod (with a sideways wobble so the rod also turns)
-        side = 0.5 * math.sin(step / 10)
-        a.state.force = T([[-pull * direction, side]], device)
-        b.state.force = T([[pull * direction, -side]], device)
-        world.step()
-        assert all_finite(world)
-        gaps.append(float(_anchor_gap(world, a, b)))
-    assert max(abs(g - d) for g in gaps) <= 0.05 * d, f"rod length drifted: min {min(gaps)}, max {max(gaps)}"
-    assert abs(float(world.landmarks[0].state.rot)) > 0.05, "the sideways push should have turned the rod"
-
-
-@pytest.mark.parametrize("direction", [1.0, -1.0], ids=["pulled-apart", "pushed-together"])
-def test_rod_joint_stretches_like_two_springs_in_series(device, direction):
-    """Steady pull F on a rod pinned at both ends by springs of stiffness k: length d + 2 F / k."""
-    d, pull = 0.5, 0.5
-    world, a, b = _jointed_pair(device, d)
-    for _ in range(200):
-        a.state.force = T([[-pull * direction, 0.0]], device)
-        b.state.force = T([[pull * direction, 0.0]], device)
-        world.step()
-    stretch = float(_anchor_gap(world, a, b)) - d
-    assert stretch == pytest.approx(direction * 2 * pull / world.joint_force, rel=0.05)
-    # nothing sideways: the chain stays on the x axis and does not turn
-    assert float(a.state.pos[0, 1].abs()) < 1e-6 and float(world.landmarks[0].state.rot.abs()) < 1e-6
-
-
-def test_pin_joint_keeps_anchors_together(device):
-    world, a, b = _jointed_pair(device, 0.0, anchor_a=(1.0, 0.0), anchor_b=(-1.0, 0.0))
-    assert world.landmarks == [], "a dist-0 joint carries no rod"
-    constraint = world.joints[0]
-    pull = 1.0
-    gaps = []
-    for _ in range(200):
-        a.state.force = T([[-pull, 0.3]], device)
-        b.state.force = T([[pull, 0.3]], device)
-        world.step()
-        assert all_finite(world)
-        gaps.append(float((constraint.pos_point(a) - constraint.pos_point(b)).norm()))
-    # the pin is a spring of stiffness k = joint_force: at rest it parts by F / k; a suddenly
-    # applied load overshoots to at most twice that (plus the soft model's margin)
-    k = world.joint_force
-    assert max(gaps) < 2 * pull / k + 2 * world.contact_margin, f"pinned anchors separated by {max(gaps)}"
-    assert gaps[-1] == pytest.approx(pull / k, rel=0.1)
-    # and the pair as a whole moved up under the common sideways force
-    assert float(a.state.pos[0, 1]) > 0.1 and float(b.state.pos[0, 1]) > 0.1
-
-
-def test_joints_need_substeps(device):
-    world = World(batch_dim=1, device=device, substeps=1)
-    a, b = Agent("a"), Agent("b")
-    world.add_agent(a)
-    world.add_agent(b)
-    with pytest.raises(ValueError, match="substeps"):
-        world.add_joint(Joint(a, b, dist=0.2))
-
-
-# -------------------------------------------------------------------------- lidar
-
-N_RAYS = 8
-
-
-def _lidar_world(device, n_rays=N_RAYS, entity_filter=lambda _: True, box_rot=0.0, batch_dim=1):
-    """Agent at the origin; a ball on +x, a box on +y, a vertical bar on -x, nothing on -y."""
-    world = World(batch_dim=batch_dim, device=device)
-    lidar = Lidar(world, n_rays=n_rays, max_range=1.0, entity_filter=entity_filter)
-    agent = Agent("scanner", shape=Sphere(0.05), sensors=[lidar])
-    world.add_agent(agent)
-    ball = Landmark("ball", shape=Sphere(0.1))
-    crate = Landmark("crate", shape=Box(length=0.2, width=0.2))
-    bar = Landmark("bar", shape=Line(length=0.4))
-    for e in (ball, crate, bar):
-        world.add_landmark(e)
-    place(agent, device)
-    place(ball, device, pos=(0.5, 0.0))
-    place(crate, device, pos=(0.0, 0.6), rot=box_rot)
-    place(bar, device, pos=(-0.7, 0.0), rot=math.pi / 2)
-    return world, agent, lidar
-
-
-def test_lidar_reads_analytic_distances(device):
-    world, agent, lidar = _lidar_world(device)
-    ranges = lidar.measure()
-    assert ranges.shape == (1, N_RAYS)
-    # ray k points at k * 45 degrees: ball surface at 0.4, box face at 0.5, bar at 0.7, the rest miss
-    expected = T([[0.4, 1.0, 0.5, 1.0, 0.7, 1.0, 1.0, 1.0]], device)
-    torch.testing.assert_close(ranges, expected, atol=1e-5, rtol=0)
-
-
-def test_lidar_sees_rotated_box_corner(device):
-    _, _, lidar = _lidar_world(device, box_rot=math.pi / 4)
-    # the box turned 45 degrees points a corner at the agent: 0.6 - 0.1 sqrt(2)
-    assert lidar.measure()[0, 2].item() == pytest.approx(0.6 - 0.1 * math.sqrt(2), abs=1e-5)
-
-
-def test_lidar_16_rays_half_angles(device):
-    world, agent, lidar = _lidar_world(device, n_rays=16)
-    ranges = lidar.measure()[0]
-    assert ranges.shape == (16,)
-    assert ranges[0].item() == pytest.approx(0.4, abs=1e-5)
-    assert ranges[4].item() == pytest.approx(0.5, abs=1e-5)
-    assert ranges[8].item() == pytest.approx(0.7, abs=1e-5)
-    # at 22.5 degrees the ray passes 0.5 sin(22.5) = 0.19 from the ball's centre: a miss
-    assert ranges[1].item() == 1.0
-    # a bar of half-length 0.2 at x = -0.7 is seen by rays within atan(0.2/0.7) = 15.9 degrees only
-    assert ranges[7].item() == 1.0 and ranges[9].item() == 1.0
-
-
-def test_lidar_rotates_with_agent(device):
-    world, agent, lidar = _lidar_world(device)
-    agent.set_rot(T([math.pi / 2], device), batch_index=None)
-    ranges = lidar.measure()
-    # ray k now points at (k + 2) * 45 degrees
-    expected = T([[0.5, 1.0, 0.7, 1.0, 1.0, 1.0, 0.4, 1.0]], device)
-    torch.testing.assert_close(ranges, expected, atol=1e-5, rtol=0)
-
-
-def test_lidar_follows_agent_position_per_env(device):
-    world, agent, lidar = _lidar_world(device, batch_dim=2)
-    agent.set_pos(T([0.2, 0.0], device), batch_index=1)
-    ranges = lidar.measure()
-    assert ranges[0, 0].item() == pytest.approx(0.4, abs=1e-5)
-    assert ranges[1, 0].item() == pytest.approx(0.2, abs=1e-5)
-    assert ranges[1, 4].item() == pytest.approx(0.9, abs=1e-5)
-
-
-def test_lidar_entity_filter_excludes_entities(device):
-    _, _, lidar = _lidar_world(device, entity_filter=lambda e: e.name != "ball")
-    ranges = lidar.measure()
-    assert ranges[0, 0].item() == 1.0, "the filtered-out ball must be invisible"
-    assert ranges[0, 2].item() == pytest.approx(0.5, abs=1e-5)
-    lidar.entity_filter = lambda e: False
-    assert torch.equal(lidar.measure(), torch.ones(1, N_RAYS, device=device))
-
-
-def test_lidar_ignores_its_own_agent_and_reads_nearest(device):
-    world, agent, lidar = _lidar_world(device)
-    # a second ball behind the first on the same ray: the nearer one wins
-    far = Landmark("far_ball", shape=Sphere(0.1))
-    world.add_landmark(far)
-    place(far, device, pos=(0.8, 0.0))
-    assert lidar.measure()[0, 0].item() == pytest.approx(0.4, abs=1e-5)
-    place(world.landmarks[0], device, pos=(5.0, 5.0))  # move the near ball away
-    assert lidar.measure()[0, 0].item() == pytest.approx(0.7, abs=1e-5)
-
 
 # --------------------------------------------------------------- limits and flags
 
@@ -606,67 +393,3 @@ def test_action_force_limits(device):
     torch.testing.assert_close(ranged.state.vel[0], T([0.05, -0.025], device), atol=1e-7, rtol=0)
     # the clamped force is written back, as in VMAS
     torch.testing.assert_close(capped.state.force[0], T([0.6, 0.8], device), atol=1e-7, rtol=0)
-
-
-# ----------------------------------------------------------------- world queries
-
-D = LINE_MIN_DIST
-
-
-def _query_world(device, shape_a, shape_b, pos_a, pos_b, rot_a=0.0, rot_b=0.0):
-    world = World(batch_dim=1, device=device)
-    a, b = Landmark("a", shape=shape_a), Landmark("b", shape=shape_b)
-    world.add_landmark(a)
-    world.add_landmark(b)
-    place(a, device, pos=pos_a, rot=rot_a)
-    place(b, device, pos=pos_b, rot=rot_b)
-    return world, a, b
-
-
-# (shape a, shape b, pos a, pos b, rot a, rot b, expected distance, overlapping)
-QUERIES = {
-    "sphere-sphere apart": (Sphere(0.1), Sphere(0.2), (0, 0), (1.0, 0), 0, 0, 0.7, False),
-    "sphere-sphere overlap": (Sphere(0.1), Sphere(0.2), (0, 0), (0, 0.25), 0, 0, -0.05, True),
-    "sphere-box apart": (Sphere(0.1), Box(0.4, 0.2), (1.0, 0), (0, 0), 0, 0, 0.7 - D, False),
-    "sphere-box rotated": (Sphere(0.1), Box(0.4, 0.2), (0, 1.0), (0, 0), 0, math.pi / 2, 0.7 - D, False),
-    "sphere-box touching": (Sphere(0.1), Box(0.4, 0.2), (0.25, 0), (0, 0), 0, 0, -1.0, True),
-    "sphere inside box": (Sphere(0.01), Box(0.4, 0.4), (0.05, 0), (0, 0), 0, 0, -1.0, True),
-    "sphere-line apart": (Sphere(0.1), Line(0.4), (0.5, 0), (0, 0), 0, 0, 0.2 - D, False),
-    "sphere-line side": (Sphere(0.1), Line(0.4), (0.1, 0.3), (0, 0), 0, 0, 0.2 - D, False),
-    "sphere-line overlap": (Sphere(0.1), Line(0.4), (0.1, 0.05), (0, 0), 0, 0, -0.05 - D, True),
-    "line-line parallel": (Line(0.4), Line(0.4), (0, 0), (0, 0.3), 0, 0, 0.3 - D, False),
-    "line-line T": (Line(0.4), Line(0.4), (0, 0), (0.5, 0), 0, math.pi / 2, 0.3 - D, False),
-    "line-line crossing": (Line(0.4), Line(0.4), (0, 0), (0, 0), 0, math.pi / 2, -D, True),
-    "box-line apart": (Box(0.4, 0.2), Line(0.4), (0, 0), (0, 0.5), 0, 0, 0.4 - D, False),
-    "box-line crossing": (Box(0.4, 0.2), Line(0.4), (0, 0), (0, 0.1), 0, math.pi / 2, -D, True),
-    "box-box apart": (Box(0.4, 0.2), Box(0.2, 0.2), (0, 0), (0.6, 0), 0, 0, 0.3 - D, False),
-    "box-box corner": (Box(0.2, 0.2), Box(0.2, 0.2), (0, 0), (0.5, 0.5), 0, 0, math.sqrt(0.18) - D, False),
-    "box-box overlap": (Box(0.2, 0.2), Box(0.2, 0.2), (0, 0), (0.15, 0.05), 0, 0, -D, True),
-}
-
-
-@pytest.mark.parametrize("case", list(QUERIES))
-def test_get_distance_and_is_overlapping(device, case):
-    shape_a, shape_b, pos_a, pos_b, rot_a, rot_b, expected, overlapping = QUERIES[case]
-    world, a, b = _query_world(device, shape_a, shape_b, pos_a, pos_b, rot_a, rot_b)
-    for first, second in ((a, b), (b, a)):  # symmetric
-        dist = world.get_distance(first, second)
-        assert dist.shape == (1,)
-        assert dist.item() == pytest.approx(expected, abs=1e-5), case
-        assert world.is_overlapping(first, second).tolist() == [overlapping], case
-        assert world.get_distance(first, second, env_index=0).item() == pytest.approx(expected, abs=1e-5)
-
-
-def test_queries_are_per_env(device):
-    world = World(batch_dim=3, device=device)
-    a, b = Landmark("a", shape=Sphere(0.1)), Landmark("b", shape=Box(0.2, 0.2))
-    world.add_landmark(a)
-    world.add_landmark(b)
-    a.set_pos(T([[0.0, 0.0], [0.5, 0.0], [0.05, 0.05]], device), batch_index=None)
-    b.set_pos(T([0.0, 0.0], device), batch_index=None)
-    assert world.is_overlapping(a, b).tolist() == [True, False, True]
-    assert world.get_distance(a, b)[1].item() == pytest.approx(0.5 - 0.1 - 0.1 - D, abs=1e-6)
-    torch.testing.assert_close(
-        world.get_distance_from_point(a, T([[1.0, 0.0]] * 3, device)),
-        T([0.9, 0.4, math.hypot(0.95, 0.05) - 0.1], device),
-    )

@@ -73,7 +73,6 @@ class Environment:
         observations = self.reset()
         self.action_space = self.get_action_space()
         self.observation_space = self.get_observation_space(observations)
-        self._renderer = None
 
     # --------------------------------------------------------------- randomness
     def _seed_rng(self, seed: int) -> None:

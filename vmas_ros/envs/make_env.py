@@ -6,9 +6,6 @@ from typing import Optional, Union
 from vmas_ros.envs.environment import Environment
 from vmas_ros.simulator.scenario import BaseScenario
 
-_WRAPPERS = ()
-
-
 def make_env(
     scenario: Union[str, BaseScenario],
     num_envs: int = 32,

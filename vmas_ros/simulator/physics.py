@@ -25,7 +25,10 @@ from torch import Tensor
 
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.tables import PairTable, WorldTables
-from vmas_ros.simulator.utils import LINE_MIN_DIST
+from vmas_ros.simulator.utils import LINE_MIN_DIST, TorchUtils
+
+#: r x f with a trailing size-1 dim, the torque of force f applied at lever arm r
+cross = TorchUtils.cross
 
 _MIN_CONTACT_DIST = 1e-6
 
@@ -53,11 +56,6 @@ class BodyState:
     vel: Tensor
     rot: Tensor
     ang_vel: Tensor
-
-
-def cross(a: Tensor, b: Tensor) -> Tensor:
-    """2D cross product keeping a trailing size-1 dim: [..., 2] x [..., 2] -> [..., 1]."""
-    return (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]).unsqueeze(-1)
 
 
 def soft_contact_force(
@@ -192,11 +190,17 @@ def scatter_pairs(total: Tensor, index_ab: Tensor, on_a: Tensor, on_b: Tensor) -
     return total.index_add(1, index_ab, values)
 
 
-def clamp_norm(vec: Tensor, max_norm: Tensor) -> Tensor:
-    """Scale down vectors longer than ``max_norm`` (inf means no limit); NaN-free gradients."""
+def clamp_norm(vec: Tensor, max_norm) -> Tensor:
+    """Scale vectors longer than ``max_norm`` back onto it (``inf`` means no limit).
+
+    Rounds like VMAS (``vec / norm * max``) so speed-limited agents stay in
+    bit parity, and keeps gradients finite: the unused branch never divides by
+    zero or multiplies by ``inf``.
+    """
     norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
-    scale = torch.where(norm > max_norm, max_norm / torch.where(norm > 0, norm, 1.0), 1.0)
-    return vec * scale
+    over = norm > max_norm
+    finite_max = torch.where(torch.isfinite(torch.as_tensor(max_norm, device=vec.device)), max_norm, 0.0)
+    return torch.where(over, vec / torch.where(over, norm, 1.0) * finite_max, vec)
 
 
 def step(

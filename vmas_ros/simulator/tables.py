@@ -58,7 +58,6 @@ class JointTable:
     anchor_b: Tensor  # [J, 2]
     dist: Tensor  # [J]
     rotate: Tensor  # [J] bool
-    fixed_rotation_is_tensor: bool
 
     @property
     def index_ab(self) -> Tensor:
@@ -174,7 +173,6 @@ def build_joints(world, entities) -> JointTable | None:
         anchor_b=torch.tensor([c.entity_b.shape.get_delta_from_anchor(c.anchor_b) for c in constraints], device=device),
         dist=torch.tensor([float(c.dist) for c in constraints], device=device),
         rotate=torch.tensor([bool(c.rotate) for c in constraints], device=device),
-        fixed_rotation_is_tensor=any(isinstance(c.fixed_rotation, Tensor) for c in constraints),
     )
 
 

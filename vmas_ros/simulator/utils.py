@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import warnings
 from enum import Enum
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Tuple, Union
 
 import torch
 from torch import Tensor
@@ -126,9 +126,9 @@ class TorchUtils:
     @staticmethod
     def clamp_with_norm(tensor: Tensor, max_norm: Union[float, Tensor]) -> Tensor:
         """Scale vectors whose norm exceeds ``max_norm`` back onto that norm."""
-        norm = torch.linalg.vector_norm(tensor, dim=-1, keepdim=True)
-        scaled = tensor / norm * max_norm
-        return torch.where(norm > max_norm, scaled, tensor)
+        from vmas_ros.simulator.physics import clamp_norm
+
+        return clamp_norm(tensor, max_norm)
 
     @staticmethod
     def rotate_vector(vector: Tensor, angle: Tensor) -> Tensor:
