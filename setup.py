@@ -49,6 +49,7 @@ setup(
     entry_points={
         "console_scripts": [
             "vmas-ros = vmas_ros.cli:main",
+            "sim_node = vmas_ros.ros.sim_node:main",
         ],
     },
     zip_safe=False,

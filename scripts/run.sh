@@ -12,4 +12,6 @@ case "$VENV" in /*) ;; *) VENV="$ROOT/$VENV" ;; esac
 
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp  # the only RMW the venv has
 export PATH="$VENV/bin:$PATH"
-exec "$VENV/bin/vmas-ros" demo "$@"
+# The main job: sim_node on the default scenario (lidar on every agent). Extra
+# arguments go to `vmas-ros sim` (e.g. --config config/waterfall.yaml, -p num_envs:=64).
+exec "$VENV/bin/vmas-ros" sim --config "$ROOT/config/simple_spread.yaml" "$@"

@@ -4,6 +4,9 @@ Subcommands:
     list    the registered scenarios
     demo    a short headless run of a scenario's heuristic: prints what happened
             (reward against random actions, speed) and optionally saves a picture
+    sim     start sim_node (the ROS 2 node) without ``ros2 launch``
+    echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
+    drive   publish a Twist on an agent's cmd_vel for a while
 """
 from __future__ import annotations
 
@@ -81,6 +84,44 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sim(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from vmas_ros.ros.sim_node import main as sim_main
+
+    ros_args = ["--ros-args"]
+    if args.config:
+        path = Path(args.config)
+        if not path.is_file():
+            print(f"vmas-ros sim: config file {path} does not exist", file=sys.stderr)
+            return 2
+        ros_args += ["--params-file", str(path)]
+    if args.scenario:
+        ros_args += ["-p", f"scenario:={args.scenario}"]
+    for item in args.param or []:
+        if ":=" not in item:
+            print(f"vmas-ros sim: -p expects name:=value, got {item!r}", file=sys.stderr)
+            return 2
+        ros_args += ["-p", item]
+    print("sim_node starting. In another terminal (same ROS_DOMAIN_ID):\n"
+          "  vmas-ros echo /agent_0/scan        # or: ros2 topic echo /agent_0/scan\n"
+          "  vmas-ros drive agent_0 --vx 0.3    # or: any geometry_msgs/Twist on /agent_0/cmd_vel\n"
+          "Ctrl-C stops it.", flush=True)
+    return sim_main(["sim_node"] + ros_args)
+
+
+def cmd_echo(args: argparse.Namespace) -> int:
+    from vmas_ros.ros.tools import echo
+
+    return echo(args.topic, count=args.count, timeout=args.timeout)
+
+
+def cmd_drive(args: argparse.Namespace) -> int:
+    from vmas_ros.ros.tools import drive
+
+    return drive(args.agent, args.vx, args.vy, args.wz, args.seconds)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="vmas-ros", description="Vectorized multi-robot simulation for ROS 2.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -95,6 +136,23 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--image", default=None, help="save a PNG of env 0 at the end")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
     demo.set_defaults(func=cmd_demo)
+    sim = sub.add_parser("sim", help="start sim_node (ROS 2) without ros2 launch")
+    sim.add_argument("--config", default=None, help="ROS parameter file (e.g. config/simple_spread.yaml)")
+    sim.add_argument("--scenario", default=None, help="scenario name (overrides the config)")
+    sim.add_argument("-p", "--param", action="append", help="extra node parameter name:=value (repeatable)")
+    sim.set_defaults(func=cmd_sim)
+    echo = sub.add_parser("echo", help="print messages of a topic")
+    echo.add_argument("topic", help="e.g. /agent_0/scan")
+    echo.add_argument("--count", type=int, default=1, help="messages to print (default 1)")
+    echo.add_argument("--timeout", type=float, default=10.0, help="seconds to wait (default 10)")
+    echo.set_defaults(func=cmd_echo)
+    drive = sub.add_parser("drive", help="publish a Twist on /<agent>/cmd_vel")
+    drive.add_argument("agent", help="agent name, e.g. agent_0")
+    drive.add_argument("--vx", type=float, default=0.0, help="forward speed, m/s (body frame)")
+    drive.add_argument("--vy", type=float, default=0.0, help="leftward speed, m/s (body frame)")
+    drive.add_argument("--wz", type=float, default=0.0, help="yaw rate, rad/s (counter-clockwise)")
+    drive.add_argument("--seconds", type=float, default=2.0, help="how long to drive (default 2)")
+    drive.set_defaults(func=cmd_drive)
     return parser
 
 

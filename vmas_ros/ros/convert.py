@@ -1,0 +1,161 @@
+"""Batched simulator state to standard ROS 2 messages.
+
+The node publishes one env of the batch. ``Snapshot.take`` copies everything
+that env needs to the host in a handful of tensor ops (one gather per
+quantity, not one per entity), and the fill functions then write plain floats
+into message objects that the node creates once and reuses.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+import torch
+
+from vmas_ros.simulator.utils import Color
+
+_INVALID = re.compile(r"[^A-Za-z0-9_]")
+
+
+def ros_name(name: str) -> str:
+    """A valid ROS name token for an entity name ("landmark 0" -> "landmark_0", "1a" -> "n1a")."""
+    token = _INVALID.sub("_", name.strip()) or "entity"
+    token = re.sub(r"_+", "_", token)
+    return token if not token[0].isdigit() else "n" + token
+
+
+def yaw_to_quaternion(yaw: float) -> tuple:
+    """(x, y, z, w) of a rotation by ``yaw`` about +z."""
+    return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+
+
+def rgb(color) -> tuple:
+    if isinstance(color, Color):
+        color = color.value
+    if isinstance(color, torch.Tensor):
+        color = color.flatten()[:3].tolist()
+    return tuple(float(c) for c in color[:3])
+
+
+@dataclass
+class Snapshot:
+    """Host copy of one env: per-entity arrays and per-agent lidar readings."""
+
+    pos: np.ndarray  # [N, 2]
+    vel: np.ndarray  # [N, 2]
+    rot: np.ndarray  # [N]
+    ang_vel: np.ndarray  # [N]
+    scans: Dict[int, List[np.ndarray]]  # agent index -> one array per lidar
+
+    @staticmethod
+    def take(world, env_index: int, lidars: Dict[int, list]) -> "Snapshot":
+        entities = world.entities
+        with torch.no_grad():
+            state = torch.cat(
+                [
+                    torch.stack([e.state.pos[env_index] for e in entities]),
+                    torch.stack([e.state.vel[env_index] for e in entities]),
+                    torch.stack([e.state.rot[env_index] for e in entities]),
+                    torch.stack([e.state.ang_vel[env_index] for e in entities]),
+                ],
+                dim=1,
+            ).cpu().numpy()
+            scans = {i: [s.measure()[env_index].cpu().numpy() for s in sensors] for i, sensors in lidars.items()}
+        return Snapshot(state[:, 0:2], state[:, 2:4], state[:, 4], state[:, 5], scans)
+
+
+def set_pose(pose, x: float, y: float, yaw: float) -> None:
+    pose.position.x, pose.position.y, pose.position.z = float(x), float(y), 0.0
+    q = yaw_to_quaternion(float(yaw))
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
+
+
+def fill_odometry(msg, x: float, y: float, yaw: float, vx: float, vy: float, wz: float) -> None:
+    """Pose in the world frame, twist in the body frame (nav_msgs/Odometry convention)."""
+    set_pose(msg.pose.pose, x, y, yaw)
+    c, s = math.cos(yaw), math.sin(yaw)
+    msg.twist.twist.linear.x = float(vx * c + vy * s)
+    msg.twist.twist.linear.y = float(-vx * s + vy * c)
+    msg.twist.twist.linear.z = 0.0
+    msg.twist.twist.angular.z = float(wz)
+
+
+@dataclass
+class ScanGeometry:
+    """LaserScan angles of one lidar; count == round((max - min) / increment) + 1 == n_rays."""
+
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    range_max: float
+
+    @staticmethod
+    def of(lidar) -> "ScanGeometry":
+        angles = lidar.angles[0].detach().cpu().tolist()
+        increment = (angles[-1] - angles[0]) / (len(angles) - 1) if len(angles) > 1 else 0.0
+        return ScanGeometry(float(angles[0]), float(angles[-1]), float(increment), float(lidar.max_range))
+
+
+def fill_scan(msg, geometry: ScanGeometry, ranges: np.ndarray) -> None:
+    """REP 117: a ray that hit nothing reads +inf, not max_range."""
+    msg.angle_min, msg.angle_max = geometry.angle_min, geometry.angle_max
+    msg.angle_increment = geometry.angle_increment
+    msg.range_min, msg.range_max = 0.0, geometry.range_max
+    msg.time_increment, msg.scan_time = 0.0, 0.0
+    values = np.where(ranges >= geometry.range_max, np.inf, ranges).astype(np.float32)
+    msg.ranges = values.tolist()
+
+
+def shape_marker(marker, entity, marker_id: int, frame_id: str, namespace: str = "entities") -> None:
+    """Static part of an entity's marker: type, size, colour (pose is set every step)."""
+    from visualization_msgs.msg import Marker
+
+    shape = entity.shape
+    marker.header.frame_id = frame_id
+    marker.ns, marker.id, marker.action = namespace, marker_id, Marker.ADD
+    r, g, b = rgb(entity.color)
+    marker.color.r, marker.color.g, marker.color.b = r, g, b
+    marker.color.a = float(getattr(entity, "alpha", 1.0)) if getattr(entity, "alpha", None) else 1.0
+    marker.scale.z = 0.05
+    if shape.kind == "sphere":
+        marker.type = Marker.CYLINDER
+        marker.scale.x = marker.scale.y = 2 * shape.radius
+    elif shape.kind == "box":
+        marker.type = Marker.CUBE
+        marker.scale.x, marker.scale.y = shape.length, shape.width
+    else:  # line: a thin box along body x
+        marker.type = Marker.CUBE
+        marker.scale.x, marker.scale.y = shape.length, 0.02
+
+
+def agent_lidars(world) -> Dict[int, list]:
+    """Agent index -> its Lidar sensors (the ones the node publishes as LaserScan)."""
+    from vmas_ros.simulator.sensors import Lidar
+
+    found = {}
+    for i, agent in enumerate(world.agents):
+        lidars = [s for s in agent.sensors if isinstance(s, Lidar)]
+        if lidars:
+            found[i] = lidars
+    return found
+
+
+def unique_names(names: Sequence[str]) -> List[str]:
+    """Sanitised names, made unique by suffixes when sanitising makes two equal."""
+    seen: Dict[str, int] = {}
+    result = []
+    for name in names:
+        token = ros_name(name)
+        count = seen.get(token, 0)
+        seen[token] = count + 1
+        result.append(token if count == 0 else f"{token}_{count}")
+    return result
+
+
+def finite_twist(twist) -> Optional[tuple]:
+    """(vx, vy, wz) if every component is finite, else None."""
+    values = (twist.linear.x, twist.linear.y, twist.angular.z)
+    return values if all(math.isfinite(v) for v in values) else None

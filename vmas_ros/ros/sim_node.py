@@ -1,0 +1,325 @@
+"""``sim_node``: the batched simulator as an ordinary ROS 2 node.
+
+It owns one vectorized environment, steps it on a timer and speaks standard
+messages for one chosen env of the batch (``env_index``):
+
+publishes  <agent>/pose (PoseStamped), <agent>/odom (Odometry), <agent>/scan
+           (LaserScan per lidar), agents/poses and landmarks/poses (PoseArray),
+           world/markers (MarkerArray), /clock, and /tf where tf2_msgs exists;
+subscribes <agent>/cmd_vel (Twist, or TwistStamped), body frame per REP 103;
+services   ~/reset (Trigger), ~/pause (SetBool), ~/step (Trigger).
+
+All stamps are simulation time, which advances by the world's dt per step.
+No physics lives here: this file converts tensors to messages and back.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Dict, List, Optional
+
+import rclpy
+import torch
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+import vmas_ros
+from vmas_ros.ros import convert
+from vmas_ros.ros.command import command_to_action
+from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, validate
+from vmas_ros.scenarios import heuristic
+from vmas_ros.simulator.sensors import Lidar
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseArray, PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import LaserScan
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+
+try:  # a full ROS install has tf2_msgs; the PyPI wheels do not
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+except ImportError:  # pragma: no cover - depends on the installation
+    TFMessage = None
+
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: a best-effort subscriber accepts reliable and best-effort publishers alike
+ACCEPT_ANY = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+class ConfigError(ValueError):
+    """Start-up parameters were refused; the message says which and why."""
+
+
+def _stamp(seconds: float) -> Time:
+    sec = int(seconds)
+    return Time(sec=sec, nanosec=int(round((seconds - sec) * 1e9)))
+
+
+class SimNode(Node):
+    """Steps a vectorized environment and publishes env ``env_index`` as ROS messages."""
+
+    def __init__(self, **overrides) -> None:
+        super().__init__("sim_node")
+        defaults = SimParams()
+        for name in SimParams.names():
+            self.declare_parameter(
+                name, overrides.get(name, getattr(defaults, name)),
+                ParameterDescriptor(description="see README: sim_node parameters", dynamic_typing=True),
+            )
+        self.params = self._read_params()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._build_env()
+        self._build_io()
+        self.paused = False
+        self.sim_time = 0.0
+        self.steps = 0
+        self._commands: Dict[int, tuple] = {}  # agent index -> (vx, vy, wz, wall time)
+        self._nonfinite_warned = 0.0
+        self._publish()
+        self._timer = self.create_timer(self.params.step_period(self.env.world.dt), self._tick)
+        self.get_logger().info(
+            f"sim_node: scenario {self.params.scenario} with {self.env.n_agents} agents, "
+            f"{self.params.num_envs} envs on {self.env.device}, publishing env {self.params.env_index}; "
+            f"drive with <agent>/cmd_vel, e.g. /{self.agent_names[0]}/cmd_vel"
+        )
+
+    # ----------------------------------------------------------------- parameters
+    def _read_params(self) -> SimParams:
+        values = {name: self.get_parameter(name).value for name in SimParams.names()}
+        errors = [error for name in SimParams.names() if (error := validate(name, values[name]))]
+        params = SimParams(**values) if not errors else None
+        if params is not None and (error := validate("env_index", params.env_index, params)):
+            errors.append(error)
+        if errors:
+            raise ConfigError("; ".join(errors))
+        return params
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        for parameter in parameters:
+            if parameter.name not in RUNTIME:
+                return SetParametersResult(
+                    successful=False, reason=f"{parameter.name} cannot change while running; restart the node"
+                )
+            if error := validate(parameter.name, parameter.value, self.params):
+                self.get_logger().warning(f"refused parameter change: {error}")
+                return SetParametersResult(successful=False, reason=error)
+        for parameter in parameters:
+            setattr(self.params, parameter.name, parameter.value)
+            if parameter.name in ("rate_hz", "real_time_factor"):
+                self._timer.cancel()
+                self._timer = self.create_timer(self.params.step_period(self.env.world.dt), self._tick)
+            if parameter.name == "env_index":
+                self._commands.clear()
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ building
+    def _build_env(self) -> None:
+        p = self.params
+        try:
+            device = resolve_device(p.device)
+            self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed, **p.kwargs())
+        except (ValueError, TypeError) as error:
+            raise ConfigError(f"cannot build scenario {p.scenario!r}: {error}") from None
+        world = self.env.world
+        if p.add_lidar:
+            for agent in world.agents:
+                if not any(isinstance(s, Lidar) for s in agent.sensors):
+                    agent.add_sensor(Lidar(
+                        world, n_rays=p.lidar_rays, max_range=p.lidar_range,
+                        entity_filter=lambda e, me=agent: e.collides(me) and me.collides(e),
+                    ))
+        self.policy = heuristic(p.scenario)(continuous_action=True)
+        self.obs = self.env.reset()
+
+    def _build_io(self) -> None:
+        world = self.env.world
+        self.agent_names = convert.unique_names([a.name for a in world.agents])
+        self.lidars = convert.agent_lidars(world)
+        self.scan_geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in self.lidars.items()}
+        frame = self.params.frame_id
+        self.pose_msgs, self.odom_msgs, self.scan_msgs = [], [], {}
+        self.pose_pubs, self.odom_pubs, self.scan_pubs = [], [], {}
+        for i, name in enumerate(self.agent_names):
+            pose, odom = PoseStamped(), Odometry()
+            pose.header.frame_id = odom.header.frame_id = frame
+            odom.child_frame_id = f"{name}/base_link"
+            self.pose_msgs.append(pose)
+            self.odom_msgs.append(odom)
+            self.pose_pubs.append(self.create_publisher(PoseStamped, f"{name}/pose", RELIABLE))
+            self.odom_pubs.append(self.create_publisher(Odometry, f"{name}/odom", RELIABLE))
+            for k, _ in enumerate(self.lidars.get(i, [])):
+                topic = f"{name}/scan" if k == 0 else f"{name}/scan_{k}"
+                scan = LaserScan()
+                scan.header.frame_id = f"{name}/base_link"
+                self.scan_msgs[(i, k)] = scan
+                self.scan_pubs[(i, k)] = self.create_publisher(LaserScan, topic, RELIABLE)
+            cmd_type = TwistStamped if self.params.use_stamped_cmd_vel else Twist
+            self.create_subscription(cmd_type, f"{name}/cmd_vel", lambda msg, i=i: self._on_cmd_vel(i, msg), ACCEPT_ANY)
+        self.agent_array, self.landmark_array = PoseArray(), PoseArray()
+        self.agent_array.header.frame_id = self.landmark_array.header.frame_id = frame
+        self.agent_array_pub = self.create_publisher(PoseArray, "agents/poses", RELIABLE)
+        self.landmark_array_pub = self.create_publisher(PoseArray, "landmarks/poses", RELIABLE)
+        self.markers = MarkerArray()
+        for k, entity in enumerate(world.entities):
+            marker = Marker()
+            convert.shape_marker(marker, entity, k, frame)
+            self.markers.markers.append(marker)
+        self.marker_pub = self.create_publisher(MarkerArray, "world/markers", RELIABLE)
+        self.clock_pub = self.create_publisher(Clock, "/clock", RELIABLE)
+        self.clock = Clock()
+        self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
+        if self.tf_pub is None:
+            self.get_logger().info("tf2_msgs is not installed: /tf is not published (poses and odometry are)")
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(SetBool, "~/pause", self._on_pause)
+        self.create_service(Trigger, "~/step", self._on_step)
+
+    # ------------------------------------------------------------------ commands
+    def _on_cmd_vel(self, agent_index: int, msg) -> None:
+        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        values = convert.finite_twist(twist)
+        if values is None:
+            now = time.monotonic()
+            if now - self._nonfinite_warned > 2.0:  # throttled: a broken teleop floods
+                self._nonfinite_warned = now
+                self.get_logger().warning(
+                    f"dropped a cmd_vel with NaN or inf for {self.agent_names[agent_index]}"
+                )
+            return
+        self._commands[agent_index] = (*values, time.monotonic())
+
+    def _actions(self) -> List[torch.Tensor]:
+        env, p = self.env, self.params
+        if p.control == "heuristic":
+            actions = [self.policy.compute_action(o, u_range=a.u_range) for o, a in zip(self.obs, env.agents)]
+        else:
+            actions = [torch.zeros(env.num_envs, env.get_agent_action_size(a), device=env.device) for a in env.agents]
+        now = time.monotonic()
+        for i, (vx, vy, wz, received) in list(self._commands.items()):
+            if now - received > p.cmd_vel_timeout:
+                del self._commands[i]  # stale: the zero/heuristic fallback drives this agent
+                continue
+            agent = env.agents[i]
+            row = command_to_action(agent, env.world, p.env_index, (vx, vy), wz)
+            actions[i] = actions[i].clone()
+            actions[i][p.env_index, : row.numel()] = row
+        return actions
+
+    # ---------------------------------------------------------------------- step
+    def _tick(self) -> None:
+        if not self.context.ok():  # shutting down (SIGINT/SIGTERM): publish nothing more
+            return
+        if not self.paused:
+            self.step_once()
+
+    def step_once(self) -> None:
+        self.obs, _, dones, _ = self.env.step(self._actions())
+        self.sim_time += self.env.world.dt
+        self.steps += 1
+        self._publish()
+
+    def _publish(self) -> None:
+        p = self.params
+        stamp = _stamp(self.sim_time)
+        self.clock.clock = stamp
+        self.clock_pub.publish(self.clock)
+        snap = convert.Snapshot.take(self.env.world, p.env_index, self.lidars)
+        n_landmarks = len(self.env.world.landmarks)
+        transforms = []
+        for i, name in enumerate(self.agent_names):
+            k = n_landmarks + i
+            x, y, yaw = snap.pos[k, 0], snap.pos[k, 1], snap.rot[k]
+            pose, odom = self.pose_msgs[i], self.odom_msgs[i]
+            pose.header.stamp = odom.header.stamp = stamp
+            convert.set_pose(pose.pose, x, y, yaw)
+            convert.fill_odometry(odom, x, y, yaw, snap.vel[k, 0], snap.vel[k, 1], snap.ang_vel[k])
+            self.pose_pubs[i].publish(pose)
+            self.odom_pubs[i].publish(odom)
+            for j, ranges in enumerate(snap.scans.get(i, [])):
+                scan = self.scan_msgs[(i, j)]
+                scan.header.stamp = stamp
+                convert.fill_scan(scan, self.scan_geometry[i][j], ranges)
+                self.scan_pubs[(i, j)].publish(scan)
+            if self.tf_pub is not None:
+                tf = TransformStamped()
+                tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, p.frame_id, f"{name}/base_link"
+                tf.transform.translation.x, tf.transform.translation.y = float(x), float(y)
+                q = convert.yaw_to_quaternion(float(yaw))
+                r = tf.transform.rotation
+                r.x, r.y, r.z, r.w = q
+                transforms.append(tf)
+        if transforms:
+            self.tf_pub.publish(TFMessage(transforms=transforms))
+        self._publish_arrays(snap, stamp, n_landmarks)
+
+    def _publish_arrays(self, snap, stamp, n_landmarks: int) -> None:
+        from geometry_msgs.msg import Pose
+
+        for array, rows, pub in (
+            (self.agent_array, range(n_landmarks, len(snap.pos)), self.agent_array_pub),
+            (self.landmark_array, range(n_landmarks), self.landmark_array_pub),
+        ):
+            if len(array.poses) != len(rows):
+                array.poses = [Pose() for _ in rows]
+            for pose, k in zip(array.poses, rows):
+                convert.set_pose(pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
+            array.header.stamp = stamp
+            pub.publish(array)
+        for k, marker in enumerate(self.markers.markers):
+            marker.header.stamp = stamp
+            convert.set_pose(marker.pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
+        self.marker_pub.publish(self.markers)
+
+    # ------------------------------------------------------------------ services
+    def _on_reset(self, request, response):
+        self.obs = self.env.reset()
+        self._commands.clear()
+        self._publish()
+        response.success, response.message = True, f"reset {self.env.num_envs} envs"
+        return response
+
+    def _on_pause(self, request, response):
+        self.paused = bool(request.data)
+        response.success, response.message = True, "paused" if self.paused else "running"
+        return response
+
+    def _on_step(self, request, response):
+        if not self.paused:
+            response.success, response.message = False, "not paused: call ~/pause with data=true first"
+            return response
+        self.step_once()
+        response.success, response.message = True, f"stepped to t={self.sim_time:.3f} s"
+        return response
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Entry point of ``ros2 run vmas_ros sim_node`` (and ``sim_node`` on PATH)."""
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    node = None
+    code = 0
+    try:
+        node = SimNode()
+        rclpy.spin(node)
+    except ConfigError as error:
+        print(f"sim_node: refused parameters: {error}", file=sys.stderr)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        code = 0
+    except Exception:
+        if rclpy.ok():
+            raise
+        code = 0  # a callback raced the shutdown a signal started: still a clean exit
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
