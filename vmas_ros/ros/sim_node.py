@@ -55,9 +55,8 @@ class ConfigError(ValueError):
     """Start-up parameters were refused; the message says which and why."""
 
 
-def _stamp(seconds: float) -> Time:
-    sec = int(seconds)
-    return Time(sec=sec, nanosec=int(round((seconds - sec) * 1e9)))
+def _stamp(nanoseconds: int) -> Time:
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 
 class SimNode(Node):
@@ -76,8 +75,8 @@ class SimNode(Node):
         self._build_env()
         self._build_io()
         self.paused = False
-        self.sim_time = 0.0
         self.steps = 0
+        self._dt_ns = round(self.env.world.dt * 1e9)
         self._commands: Dict[int, tuple] = {}  # agent index -> (vx, vy, wz, wall time)
         self._nonfinite_warned = 0.0
         self._publish()
@@ -219,13 +218,12 @@ class SimNode(Node):
 
     def step_once(self) -> None:
         self.obs, _, dones, _ = self.env.step(self._actions())
-        self.sim_time += self.env.world.dt
         self.steps += 1
         self._publish()
 
     def _publish(self) -> None:
         p = self.params
-        stamp = _stamp(self.sim_time)
+        stamp = _stamp(self.sim_time_ns)
         self.clock.clock = stamp
         self.clock_pub.publish(self.clock)
         snap = convert.Snapshot.take(self.env.world, p.env_index, self.lidars)
@@ -275,6 +273,11 @@ class SimNode(Node):
             convert.set_pose(marker.pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
         self.marker_pub.publish(self.markers)
 
+    @property
+    def sim_time_ns(self) -> int:
+        """Simulation time as an exact integer: steps x dt (no float drift over long runs)."""
+        return self.steps * self._dt_ns
+
     # ------------------------------------------------------------------ services
     def _on_reset(self, request, response):
         self.obs = self.env.reset()
@@ -293,7 +296,7 @@ class SimNode(Node):
             response.success, response.message = False, "not paused: call ~/pause with data=true first"
             return response
         self.step_once()
-        response.success, response.message = True, f"stepped to t={self.sim_time:.3f} s"
+        response.success, response.message = True, f"stepped to t={self.sim_time_ns / 1e9:.3f} s"
         return response
 
 
