@@ -4,6 +4,7 @@ Subcommands:
     list    the registered scenarios
     demo    a short headless run of a scenario's heuristic: prints what happened
             (reward against random actions, speed) and optionally saves a picture
+    render  roll out a scenario and save it as a GIF, MP4 or PNG
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
     drive   publish a Twist on an agent's cmd_vel for a while
@@ -84,6 +85,52 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_render(args: argparse.Namespace) -> int:
+    """Roll out the heuristic (or random actions) in env 0 and save the frames."""
+    from pathlib import Path
+
+    import numpy as np
+    from PIL import Image
+    from tqdm import tqdm
+
+    import vmas_ros
+    from vmas_ros.scenarios import heuristic
+    from vmas_ros.viz.video import VIDEO_SUFFIXES, save_frames
+
+    out = Path(args.out)
+    if out.suffix.lower() not in VIDEO_SUFFIXES:
+        print(f"vmas-ros render: --out must end in {', '.join(VIDEO_SUFFIXES)}, got {out.name!r}", file=sys.stderr)
+        return 2
+    try:
+        env = vmas_ros.make_env(args.scenario, num_envs=1, device=args.device, seed=args.seed,
+                                **_parse_kwargs(args.scenario_kwargs))
+    except ValueError as error:
+        print(f"vmas-ros render: {error}", file=sys.stderr)
+        return 2
+    policy = None if args.random else heuristic(args.scenario)(continuous_action=True)
+    obs = env.reset()
+
+    def frame():
+        image = env.render(mode="rgb_array")
+        if args.size and args.size != image.shape[1]:
+            pil = Image.fromarray(image)
+            image = np.asarray(pil.resize((args.size, round(args.size * pil.height / pil.width)), Image.LANCZOS))
+        return image
+
+    frames = [frame()]
+    for _ in tqdm(range(args.steps), desc=f"render {args.scenario}", disable=args.quiet):
+        if policy is None:
+            actions = env.get_random_actions()
+        else:
+            actions = [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents)]
+        obs, _, _, _ = env.step(actions)
+        frames.append(frame())
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_frames(frames, out, fps=args.fps)
+    print(f"saved {len(frames)} frames of {args.scenario} to {out}")
+    return 0
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -136,6 +183,18 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--image", default=None, help="save a PNG of env 0 at the end")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
     demo.set_defaults(func=cmd_demo)
+    render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
+    render.add_argument("--scenario", default="simple_spread", help="scenario name")
+    render.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")
+    render.add_argument("--steps", type=int, default=100, help="steps to roll out (default 100)")
+    render.add_argument("--out", required=True, help="output file: .gif, .mp4 (needs imageio-ffmpeg) or .png (last frame)")
+    render.add_argument("--random", action="store_true", help="random actions instead of the heuristic")
+    render.add_argument("--size", type=int, default=0, help="output width in pixels (default: the scenario's)")
+    render.add_argument("--fps", type=int, default=10, help="frames per second (default 10)")
+    render.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    render.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    render.add_argument("--quiet", action="store_true", help="no progress bar")
+    render.set_defaults(func=cmd_render)
     sim = sub.add_parser("sim", help="start sim_node (ROS 2) without ros2 launch")
     sim.add_argument("--config", default=None, help="ROS parameter file (e.g. config/simple_spread.yaml)")
     sim.add_argument("--scenario", default=None, help="scenario name (overrides the config)")
