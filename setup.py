@@ -36,6 +36,7 @@ setup(
         "foxglove": ["foxglove-sdk"],
         "record": ["mcap", "mcap-ros2-support"],
         "train": ["torchrl", "onnx", "onnxruntime", "matplotlib"],
+        "play": ["pygame"],
         "test": [
             "pytest",
             "pytest-timeout",
@@ -44,6 +45,8 @@ setup(
             "rosbags",
             "colcon-common-extensions",
             "hypothesis",
+            "websockets",
+            "pygame",
         ],
     },
     entry_points={

@@ -4,6 +4,7 @@ Subcommands:
     list    the registered scenarios
     demo    a short headless run of a scenario's heuristic: prints what happened
             (reward against random actions, speed) and optionally saves a picture
+    play    drive a scenario's agents with the keyboard (pygame window)
     render  roll out a scenario and save it as a GIF, MP4 or PNG
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
@@ -183,6 +184,11 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--image", default=None, help="save a PNG of env 0 at the end")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
     demo.set_defaults(func=cmd_demo)
+    from vmas_ros.viz.interactive import add_play_arguments, run_play_command
+
+    play = sub.add_parser("play", help="drive agents with the keyboard in a pygame window")
+    add_play_arguments(play)
+    play.set_defaults(func=run_play_command)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
     render.add_argument("--scenario", default="simple_spread", help="scenario name")
     render.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")
@@ -217,7 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    if getattr(args, "num_envs", 1) < 1 or getattr(args, "steps", 1) < 1:
+    if (getattr(args, "num_envs", 1) or 1) < 1 or (getattr(args, "steps", 1) or 1) < 1:
         print("vmas-ros: --num-envs and --steps must be >= 1", file=sys.stderr)
         return 2
     return args.func(args)
