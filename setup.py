@@ -19,7 +19,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.json"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.py"))),
     ],
     # torch is deliberately unpinned here; scripts/setup.sh installs the pinned
@@ -33,7 +33,7 @@ setup(
             "ros-jazzy-std-srvs",
             "ros-jazzy-rosgraph-msgs",
         ],
-        "foxglove": ["foxglove-sdk"],
+        "foxglove": ["foxglove-sdk>=0.30"],
         "record": ["mcap", "mcap-ros2-support"],
         "train": ["torchrl", "onnx", "onnxruntime", "matplotlib"],
         "play": ["pygame"],

@@ -37,6 +37,8 @@ class SimParams:
     cmd_vel_timeout: float = 0.5
     use_stamped_cmd_vel: bool = False
     control: str = "zero"
+    foxglove_port: int = 0
+    foxglove_host: str = "127.0.0.1"
 
     @staticmethod
     def names() -> List[str]:
@@ -105,6 +107,10 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
         return f"lidar_range must be > 0, got {value}"
     if name == "frame_id" and not value:
         return "frame_id must not be empty"
+    if name == "foxglove_port" and not 0 <= value <= 65535:
+        return f"foxglove_port must be in [0, 65535] (0: off), got {value}"
+    if name == "foxglove_host" and not value:
+        return "foxglove_host must not be empty (127.0.0.1 keeps the server private to this machine)"
     if name == "control" and value not in CONTROL_MODES:
         return f"control must be one of {', '.join(CONTROL_MODES)}, got {value!r}"
     return None

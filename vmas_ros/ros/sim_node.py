@@ -79,6 +79,8 @@ class SimNode(Node):
         self._dt_ns = round(self.env.world.dt * 1e9)
         self._commands: Dict[int, tuple] = {}  # agent index -> (vx, vy, wz, wall time)
         self._nonfinite_warned = 0.0
+        self.rewards = None
+        self.foxglove = self._start_foxglove()
         self._publish()
         self._timer = self.create_timer(self.params.step_period(self.env.world.dt), self._tick)
         self.get_logger().info(
@@ -178,6 +180,37 @@ class SimNode(Node):
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
 
+    def _start_foxglove(self):
+        """The live Foxglove server, when ``foxglove_port`` is set (0: off)."""
+        p = self.params
+        if p.foxglove_port == 0:
+            return None
+        from vmas_ros.viz.foxglove_bridge import FoxgloveBridge
+
+        try:
+            bridge = FoxgloveBridge(
+                host=p.foxglove_host, port=p.foxglove_port, frame_id=p.frame_id,
+                agent_names=self.agent_names, on_twist=self._on_foxglove_twist,
+            )
+        except (RuntimeError, OSError) as error:
+            raise ConfigError(f"cannot start the Foxglove server on {p.foxglove_host}:{p.foxglove_port}: {error}") from None
+        if p.foxglove_host not in ("127.0.0.1", "localhost", "::1"):
+            self.get_logger().warning(
+                f"Foxglove server listens on {p.foxglove_host}: anyone who reaches that address can watch "
+                f"and drive the simulation"
+            )
+        self.get_logger().info(f"Foxglove: open {bridge.url} in Foxglove (layout: config/foxglove_layout.json)")
+        return bridge
+
+    def _on_foxglove_twist(self, agent_index: int, vx: float, vy: float, wz: float) -> None:
+        # runs on the Foxglove server's thread: one dict assignment, read by the step
+        self._commands[agent_index] = (vx, vy, wz, time.monotonic())
+
+    def destroy_node(self):
+        if getattr(self, "foxglove", None) is not None:
+            self.foxglove.close()
+        return super().destroy_node()
+
     # ------------------------------------------------------------------ commands
     def _on_cmd_vel(self, agent_index: int, msg) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
@@ -199,9 +232,12 @@ class SimNode(Node):
         else:
             actions = [torch.zeros(env.num_envs, env.get_agent_action_size(a), device=env.device) for a in env.agents]
         now = time.monotonic()
-        for i, (vx, vy, wz, received) in list(self._commands.items()):
+        for i, entry in list(self._commands.items()):
+            vx, vy, wz, received = entry
             if now - received > p.cmd_vel_timeout:
-                del self._commands[i]  # stale: the zero/heuristic fallback drives this agent
+                # stale: the fallback drives this agent (unless a newer command just arrived)
+                if self._commands.get(i) is entry:
+                    del self._commands[i]
                 continue
             agent = env.agents[i]
             row = command_to_action(agent, env.world, p.env_index, (vx, vy), wz)
@@ -217,7 +253,7 @@ class SimNode(Node):
             self.step_once()
 
     def step_once(self) -> None:
-        self.obs, _, dones, _ = self.env.step(self._actions())
+        self.obs, self.rewards, _, _ = self.env.step(self._actions())
         self.steps += 1
         self._publish()
 
@@ -254,6 +290,13 @@ class SimNode(Node):
         if transforms:
             self.tf_pub.publish(TFMessage(transforms=transforms))
         self._publish_arrays(snap, stamp, n_landmarks)
+        if self.foxglove is not None:
+            world = self.env.world
+            self.foxglove.publish(snap, world.entities, self.scan_geometry, self.sim_time_ns, env_index=p.env_index)
+            if self.rewards is not None:
+                values = {name: float(r[p.env_index]) for name, r in zip(self.agent_names, self.rewards)}
+                values["total"] = sum(values.values())
+                self.foxglove.log_json("/rewards", values, self.sim_time_ns)
 
     def _publish_arrays(self, snap, stamp, n_landmarks: int) -> None:
         from geometry_msgs.msg import Pose
