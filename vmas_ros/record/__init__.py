@@ -1,0 +1,34 @@
+"""Recording what the simulator publishes to rosbag2-compatible MCAP files.
+
+* :class:`McapRecorder` writes ROS 2 messages (CDR) with full ``ros2msg``
+  schemas and rosbag2's channel metadata, splits by size or duration and
+  closes itself at interpreter exit;
+* :func:`serialize_tf_message` builds /tf's ``tf2_msgs/msg/TFMessage`` CDR
+  without the (wheel-less) tf2_msgs package;
+* :func:`message_definition` gives the schema text of an installed message type;
+* :func:`recover` turns the file of a killed recorder into a valid MCAP.
+
+Needs the ``record`` extra (``mcap``, ``mcap-ros2-support``) and rclpy for
+serialising messages.
+"""
+from vmas_ros.record.mcap_recorder import (
+    DEFAULT_COMPRESSION,
+    TF_MESSAGE_TYPE,
+    McapRecorder,
+    qos_profile_yaml,
+    serialize_tf_message,
+    split_path,
+)
+from vmas_ros.record.recover import recover
+from vmas_ros.record.schemas import message_definition
+
+__all__ = [
+    "DEFAULT_COMPRESSION",
+    "McapRecorder",
+    "TF_MESSAGE_TYPE",
+    "message_definition",
+    "qos_profile_yaml",
+    "recover",
+    "serialize_tf_message",
+    "split_path",
+]

@@ -1,0 +1,560 @@
+"""A rosbag2-compatible MCAP recorder that runs inside the publishing process.
+
+:class:`McapRecorder` writes what a node publishes straight to MCAP files of the
+``ros2`` profile, as ``ros2 bag record -s mcap`` would: one Schema record per
+message type (encoding ``ros2msg``, the full definition from
+:mod:`vmas_ros.record.schemas`), one Channel per topic (message encoding
+``cdr``, metadata ``offered_qos_profiles`` in rosbag2's YAML), CDR messages in
+chunks, and on close a summary (schemas, channels, statistics, chunk and
+message indexes). ``rosbags``, ``mcap-ros2-support``, Foxglove and ``ros2 bag``
+read the files.
+
+Split files
+    With ``max_bytes`` or ``max_duration_s`` the recording continues in a new
+    file when the current one is full. The first file is ``path`` itself, the
+    next ones sit beside it as ``<stem>_1.mcap``, ``<stem>_2.mcap``, ... where
+    ``<stem>`` is the name of ``path`` without its ``.mcap`` suffix
+    (``run.mcap`` -> ``run_1.mcap``, ``run_2.mcap``). Every file is a complete,
+    independently readable MCAP. :attr:`McapRecorder.paths` lists them.
+
+Durability
+    Messages collect in an in-memory chunk (``chunk_size`` bytes, before
+    compression); a full chunk goes to the operating system at once (unbuffered
+    writes), so a killed process (SIGKILL, a crash) loses at most the open chunk
+    and the summary; :func:`vmas_ros.record.recover.recover` rebuilds a valid
+    file from the rest. :meth:`McapRecorder.flush` ends the open chunk early. A
+    normal interpreter exit closes the recorder (``atexit``), and so does
+    ``SystemExit`` raised from a signal handler. Nothing is ``fsync``-ed: a power
+    cut can lose more.
+
+Signals
+    With ``defer_signals`` (the default) a write from the main thread blocks
+    SIGINT and SIGTERM while it changes the file's state, so that a
+    KeyboardInterrupt or a ``sys.exit`` from a signal handler lands between two
+    writes, never in the middle of one (which would leave a corrupt chunk for
+    the ``atexit`` close to finish). That costs two ``pthread_sigmask`` calls
+    per write (a few microseconds); :meth:`McapRecorder.batch` pays them once
+    for a group of writes.
+"""
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import re
+import signal
+import struct
+import threading
+from pathlib import Path
+from typing import Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
+
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+
+from vmas_ros.record.schemas import message_definition, normalize_type
+
+__all__ = [
+    "DEFAULT_COMPRESSION",
+    "McapRecorder",
+    "TF_MESSAGE_TYPE",
+    "qos_profile_yaml",
+    "serialize_tf_message",
+    "split_path",
+]
+
+try:  # what mcap needs to write (and read) zstd chunks
+    import zstandard  # noqa: F401
+
+    DEFAULT_COMPRESSION = "zstd"
+except ImportError:  # pragma: no cover - depends on the installation
+    DEFAULT_COMPRESSION = "none"
+
+_COMPRESSIONS = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+    "": CompressionType.NONE,
+    None: CompressionType.NONE,
+}
+
+#: the type name the node uses for /tf (tf2_msgs has no PyPI wheel: see write_raw)
+TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
+
+#: bytes of a Message record besides its data: opcode, length, channel id,
+#: sequence, log time, publish time
+_MESSAGE_RECORD_OVERHEAD = 1 + 8 + 2 + 4 + 8 + 8
+#: a Chunk record besides its records: opcode, length, start/end time,
+#: uncompressed size and CRC, compression name (<= 4 chars), records length
+_CHUNK_OVERHEAD = 1 + 8 + 8 + 8 + 8 + 4 + 4 + 4 + 8
+#: a MessageIndex record per channel of a chunk, and an entry per message
+_INDEX_OVERHEAD = 1 + 8 + 2 + 4
+_INDEX_ENTRY = 8 + 8
+
+_QOS = ("reliable", "best_effort")
+
+# rmw's "infinite" duration (INT64_MAX ns) as rosbag2 writes it
+_INFINITE = "    sec: 9223372036\n    nsec: 854775807\n"
+
+
+def qos_profile_yaml(reliability: str = "reliable", depth: int = 10) -> str:
+    """``offered_qos_profiles`` YAML as rosbag2 (Jazzy, metadata version 9) writes it
+    for one publisher with keep_last(``depth``), volatile, ``reliability``."""
+    if reliability not in _QOS:
+        raise ValueError(f"qos must be 'reliable' or 'best_effort', not {reliability!r}")
+    return (
+        "- history: keep_last\n"
+        f"  depth: {int(depth)}\n"
+        f"  reliability: {reliability}\n"
+        "  durability: volatile\n"
+        f"  deadline:\n{_INFINITE}"
+        f"  lifespan:\n{_INFINITE}"
+        "  liveliness: automatic\n"
+        f"  liveliness_lease_duration:\n{_INFINITE}"
+        "  avoid_ros_namespace_conventions: false"
+    )
+
+
+def split_path(path: Union[str, os.PathLike], index: int) -> Path:
+    """The path of file ``index`` of a recording to ``path``: ``path`` itself for
+    0, else ``<stem>_<index>.mcap`` in the same directory."""
+    path = Path(path)
+    if index == 0:
+        return path
+    stem = path.name[: -len(".mcap")] if path.name.endswith(".mcap") else path.name
+    return path.with_name(f"{stem}_{index}.mcap")
+
+
+def _stale_split_files(path: Path) -> List[Path]:
+    stem = path.name[: -len(".mcap")] if path.name.endswith(".mcap") else path.name
+    pattern = re.compile(re.escape(stem) + r"_\d+\.mcap$")
+    if not path.parent.is_dir():
+        return []
+    return sorted(p for p in path.parent.iterdir() if pattern.fullmatch(p.name))
+
+
+# ---------------------------------------------------------------- TF messages
+_CDR_LE = b"\x00\x01\x00\x00"  # encapsulation header: plain CDR, little endian
+_TRANSFORM_BYTES = 7 * 8  # geometry_msgs/Transform: Vector3 + Quaternion, float64 each
+
+
+def _pad(buf: bytearray, alignment: int) -> None:
+    """Zero-pad ``buf`` (header + payload) so the payload length is a multiple of ``alignment``."""
+    buf.extend(b"\x00" * (-(len(buf) - 4) % alignment))
+
+
+def serialize_tf_message(transforms: Sequence) -> bytes:
+    """CDR bytes of a ``tf2_msgs/msg/TFMessage`` holding ``transforms``.
+
+    ``transforms`` are ``geometry_msgs.msg.TransformStamped`` instances. tf2_msgs
+    has no PyPI wheel, so rclpy cannot build a TFMessage; its CDR is a uint32
+    element count followed by the elements, which this function takes from
+    rclpy's serialisation of each TransformStamped. CDR aligns every primitive
+    relative to the start of the payload (after the 4-byte encapsulation
+    header), so an element is not always a verbatim copy of its standalone
+    bytes: the 4-byte aligned part (stamp, frame ids) is copied after padding
+    to 4, the float64 part (the transform) after padding to 8 of the combined
+    payload. Pass the result to :meth:`McapRecorder.write_raw` with
+    :data:`TF_MESSAGE_TYPE`.
+    """
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.serialization import serialize_message
+
+    out = bytearray(_CDR_LE)
+    out += struct.pack("<I", len(transforms))
+    for k, tf in enumerate(transforms):
+        if not isinstance(tf, TransformStamped):
+            raise TypeError(f"transforms[{k}] is {type(tf).__name__}, not geometry_msgs/TransformStamped")
+        raw = serialize_message(tf)
+        if raw[:4] != _CDR_LE:
+            raise ValueError(f"unexpected CDR encapsulation {raw[:4].hex()} from rclpy (expected little endian)")
+        body = raw[4:]
+        # stamp (int32 sec, uint32 nanosec), then two strings (uint32 length incl. NUL + bytes);
+        # rclpy leaves padding bytes uninitialised, so rebuild the padding as zeros
+        _pad(out, 4)
+        out += body[:8]
+        pos = 8
+        for _ in range(2):
+            pos += -pos % 4
+            (length,) = struct.unpack_from("<I", body, pos)
+            _pad(out, 4)
+            out += body[pos:pos + 4 + length]
+            pos += 4 + length
+        transform = body[pos + (-pos % 8):]
+        if len(transform) != _TRANSFORM_BYTES:
+            raise ValueError(f"unexpected TransformStamped layout from rclpy ({len(body)} bytes)")
+        _pad(out, 8)
+        out += transform
+    return bytes(out)
+
+
+# ------------------------------------------------------------------ the files
+class _UnbufferedFile:
+    """The output stream handed to ``mcap.writer.Writer``: each write goes to the OS
+    at once (so a finished chunk survives a SIGKILL) and the position is counted
+    here. Not a RawIOBase on purpose: Writer would wrap that in a BufferedWriter."""
+
+    def __init__(self, path: Path) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pos = 0
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        while view.nbytes:
+            n = os.write(self._fd, view)
+            self._pos += n
+            view = view[n:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            fd, self._fd = self._fd, -1
+            os.close(fd)
+
+
+class _OpenFile:
+    """One MCAP file of the recording: its writer and what it already registered."""
+
+    def __init__(self, path: Path, chunk_size: int, compression: CompressionType) -> None:
+        self.path = path
+        self.stream = _UnbufferedFile(path)
+        self.writer = Writer(self.stream, chunk_size=chunk_size, compression=compression)
+        self.writer.start(profile="ros2", library=f"vmas_ros.record; {LIBRARY_IDENTIFIER}")
+        self.schemas: Dict[str, int] = {}
+        self.channels: Dict[str, int] = {}
+        self.messages = 0
+        self.first_log_time: Optional[int] = None
+        # the open chunk, as the writer will write it out: records (uncompressed),
+        # messages and channels (for the message indexes that follow the chunk)
+        self._chunk_records = 0
+        self._chunk_messages = 0
+        self._chunk_channels: set = set()
+
+    def size(self) -> int:
+        """Bytes written so far plus what the open chunk will add (uncompressed)."""
+        if not self._chunk_records:
+            return self.stream.tell()
+        return (
+            self.stream.tell() + _CHUNK_OVERHEAD + self._chunk_records
+            + _INDEX_ENTRY * self._chunk_messages + _INDEX_OVERHEAD * len(self._chunk_channels)
+        )
+
+    def _track(self, before: int, record_bytes: int, channel_id: Optional[int] = None) -> None:
+        if self.stream.tell() != before:  # the writer just wrote out the chunk
+            self._reset_chunk()
+        else:
+            self._chunk_records += record_bytes
+            if channel_id is not None:
+                self._chunk_messages += 1
+                self._chunk_channels.add(channel_id)
+
+    def _reset_chunk(self) -> None:
+        self._chunk_records = self._chunk_messages = 0
+        self._chunk_channels.clear()
+
+    def channel(self, topic: str, type_name: str, definition: str, metadata: Dict[str, str]) -> int:
+        channel_id = self.channels.get(topic)
+        if channel_id is None:
+            schema_id = self.schemas.get(type_name)
+            if schema_id is None:
+                data = definition.encode()
+                before = self.stream.tell()
+                schema_id = self.schemas[type_name] = self.writer.register_schema(type_name, "ros2msg", data)
+                self._track(before, 9 + 2 + 4 + len(type_name) + 4 + len("ros2msg") + 4 + len(data))
+            before = self.stream.tell()
+            channel_id = self.channels[topic] = self.writer.register_channel(topic, "cdr", schema_id, metadata)
+            meta = 4 + sum(8 + len(k.encode()) + len(v.encode()) for k, v in metadata.items())
+            self._track(before, 9 + 2 + 2 + 4 + len(topic.encode()) + 4 + len("cdr") + meta)
+        return channel_id
+
+    def add(self, channel_id: int, data: bytes, log_time: int, sequence: int) -> None:
+        before = self.stream.tell()
+        self.writer.add_message(channel_id, log_time=log_time, data=data, publish_time=log_time, sequence=sequence)
+        if self.first_log_time is None:
+            self.first_log_time = log_time
+        self.messages += 1
+        self._track(before, len(data) + _MESSAGE_RECORD_OVERHEAD, channel_id)
+
+    def flush(self) -> None:
+        self.writer.flush()
+        self._reset_chunk()
+
+    def close(self) -> None:
+        try:
+            self.writer.finish()
+        finally:
+            self.stream.close()
+
+
+# --------------------------------------------------------------- the recorder
+class McapRecorder:
+    """Records ROS 2 messages to rosbag2-compatible MCAP files.
+
+    :param path: the first (or only) file; see the module docstring for split names.
+    :param topics: topics to record (None: all); writes to other topics are ignored.
+    :param max_bytes: start a new file before a message would grow the current
+        one's data section past this many bytes (the open chunk counts
+        uncompressed, so compressed files come out smaller; the summary written
+        at close, a few hundred bytes plus the indexes, comes on top).
+    :param max_duration_s: start a new file before a message whose log time is
+        more than this many seconds after the file's first message: a file's log
+        times span at most ``max_duration_s``.
+    :param chunk_size: chunk size in bytes before compression; what a SIGKILL can lose.
+    :param compression: ``"zstd"`` (the default when ``zstandard`` is installed),
+        ``"lz4"`` or ``"none"``.
+    :param overwrite: replace an existing recording at ``path`` (including its
+        ``<stem>_<n>.mcap`` split files); otherwise an existing file is an error.
+    :param defer_signals: block SIGINT/SIGTERM during a write from the main thread.
+
+    Topic names are fully qualified: a name without a leading ``/`` gets one,
+    both in ``topics`` and in writes. Log times are nanoseconds and must not
+    decrease over the whole recording (ValueError otherwise). Use as a context
+    manager or call :meth:`close`; an unclosed recorder closes at interpreter exit.
+    """
+
+    def __init__(
+        self,
+        path: Union[str, os.PathLike],
+        topics: Optional[Iterable[str]] = None,
+        max_bytes: Optional[int] = None,
+        max_duration_s: Optional[float] = None,
+        chunk_size: int = 1024 * 1024,
+        compression: Optional[str] = DEFAULT_COMPRESSION,
+        overwrite: bool = False,
+        defer_signals: bool = True,
+    ) -> None:
+        if isinstance(topics, str):
+            raise TypeError("topics must be an iterable of topic names, not a single string")
+        if max_bytes is not None and max_bytes <= 0:
+            raise ValueError(f"max_bytes must be positive, not {max_bytes}")
+        if max_duration_s is not None and not max_duration_s > 0:
+            raise ValueError(f"max_duration_s must be positive, not {max_duration_s}")
+        if chunk_size <= 0:
+            raise ValueError(f"chunk_size must be positive, not {chunk_size}")
+        if compression not in _COMPRESSIONS:
+            raise ValueError(f"compression must be 'zstd', 'lz4' or 'none', not {compression!r}")
+        if compression == "zstd" and DEFAULT_COMPRESSION != "zstd":
+            raise ValueError("compression='zstd' needs the zstandard package (pip install zstandard)")
+        self._path = Path(path)
+        stale = _stale_split_files(self._path)
+        if not overwrite and (self._path.exists() or stale):
+            raise FileExistsError(
+                f"{self._path if self._path.exists() else stale[0]} exists; "
+                "choose another path or pass overwrite=True"
+            )
+        for old in stale:
+            old.unlink()
+        self._path.parent.mkdir(parents=True, exist_ok=True)
+        self._topics = None if topics is None else frozenset(_absolute(t) for t in topics)
+        self._max_bytes = max_bytes
+        self._max_duration_ns = None if max_duration_s is None else int(round(max_duration_s * 1e9))
+        self._chunk_size = int(chunk_size)
+        self._compression = _COMPRESSIONS[compression]
+        self._defer = defer_signals and hasattr(signal, "pthread_sigmask")
+        self._deferring = 0  # nesting depth of deferred-signal sections (main thread only)
+        self._lock = threading.RLock()
+        self._types: Dict[str, Tuple[str, Dict[str, str]]] = {}  # topic -> (type, channel metadata)
+        self._definitions: Dict[str, str] = {}
+        self._names: Dict[Tuple[str, str], Tuple[str, str]] = {}  # as written -> (topic, type) recorded
+        self._counts: Dict[str, int] = {}
+        self._last: Optional[Tuple[int, str]] = None  # (log time, topic) of the last message
+        self._paths: List[Path] = []
+        self._file: Optional[_OpenFile] = None
+        self._closed = False
+        self._open_next()
+        atexit.register(self.close)
+
+    # ------------------------------------------------------------- properties
+    @property
+    def paths(self) -> List[Path]:
+        """The files of this recording so far, in order (the last one may be open)."""
+        return list(self._paths)
+
+    @property
+    def message_counts(self) -> Dict[str, int]:
+        """Messages recorded per topic, over all files."""
+        return dict(self._counts)
+
+    @property
+    def message_count(self) -> int:
+        return sum(self._counts.values())
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def selects(self, topic: str) -> bool:
+        """Whether writes to ``topic`` are recorded."""
+        return self._topics is None or topic in self._topics or _absolute(topic) in self._topics
+
+    # ----------------------------------------------------------------- writes
+    def write(
+        self,
+        topic: str,
+        type_name: str,
+        message,
+        log_time_ns: int,
+        qos: str = "reliable",
+        serialized: Optional[bytes] = None,
+    ) -> bool:
+        """Record ``message`` (an rclpy message of ``type_name``, e.g.
+        ``sensor_msgs/msg/LaserScan``) on ``topic`` at ``log_time_ns``.
+
+        ``serialized`` (CDR bytes of ``message``) skips the serialisation.
+        ``qos`` ("reliable" or "best_effort") goes to the channel's
+        ``offered_qos_profiles`` when the topic is first written. Returns False
+        (and does nothing) for a topic the filter does not select.
+        """
+        if not self.selects(topic):
+            return False
+        if serialized is None:
+            if message is None:
+                raise TypeError("write() needs a message or serialized bytes")
+            from rclpy.serialization import serialize_message
+
+            serialized = serialize_message(message)
+        return self._record(topic, type_name, serialized, log_time_ns, qos)
+
+    def write_raw(
+        self, topic: str, type_name: str, cdr_bytes: bytes, log_time_ns: int, qos: str = "reliable"
+    ) -> bool:
+        """Record CDR bytes (with their 4-byte encapsulation header) of ``type_name``,
+        for types without an importable Python class, such as /tf's TFMessage
+        (see :func:`serialize_tf_message`). Returns False for an unselected topic."""
+        if not self.selects(topic):
+            return False
+        return self._record(topic, type_name, cdr_bytes, log_time_ns, qos)
+
+    def _record(self, topic: str, type_name: str, data, log_time_ns: int, qos: str) -> bool:
+        names = self._names.get((topic, type_name))
+        if names is None:  # first use of this (topic, type) spelling: validate once
+            pkg, name = normalize_type(type_name)
+            names = self._names[(topic, type_name)] = (_absolute(topic), f"{pkg}/msg/{name}")
+        topic, type_name = names
+        if qos not in _QOS:
+            qos_profile_yaml(qos)  # raises the error
+        log_time = int(log_time_ns)
+        if log_time != log_time_ns or log_time < 0 or log_time >= 2**64:
+            raise ValueError(f"log_time_ns must be a non-negative integer of nanoseconds, not {log_time_ns!r}")
+        if type(data) is not bytes:
+            data = bytes(data)
+        # inlined _deferred_signals(): this is the hot path
+        defer = self._defer and not self._deferring and threading.get_ident() == _MAIN_THREAD_ID
+        if defer:
+            old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
+            self._deferring += 1
+        try:
+            with self._lock:
+                self._record_locked(topic, type_name, data, log_time, qos)
+        finally:
+            if defer:
+                self._deferring -= 1
+                signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        return True
+
+    def _record_locked(self, topic: str, type_name: str, data: bytes, log_time: int, qos: str) -> None:
+        if self._closed:
+            raise RuntimeError(f"the recorder of {self._path} is closed")
+        known = self._types.get(topic)
+        if known is None:
+            definition = self._definitions.get(type_name)
+            if definition is None:
+                definition = self._definitions[type_name] = message_definition(type_name)
+            known = self._types[topic] = (type_name, {"offered_qos_profiles": qos_profile_yaml(qos)})
+        elif known[0] != type_name:
+            raise ValueError(f"topic {topic} is recorded as {known[0]}; cannot also record {type_name} on it")
+        if self._last is not None and log_time < self._last[0]:
+            raise ValueError(
+                f"log time went backwards on {topic}: {log_time} ns after {self._last[0]} ns "
+                f"(on {self._last[1]}); log times must not decrease"
+            )
+        f = self._file
+        if f is not None and f.messages and self._full(f, log_time, len(data)):
+            self._close_file()
+            f = None
+        if f is None:
+            self._open_next()
+            f = self._file
+        channel_id = f.channel(topic, type_name, self._definitions[type_name], known[1])
+        count = self._counts.get(topic, 0)
+        f.add(channel_id, data, log_time, count % 2**32)
+        self._counts[topic] = count + 1
+        self._last = (log_time, topic)
+
+    def _full(self, f: _OpenFile, log_time: int, data_bytes: int) -> bool:
+        if self._max_duration_ns is not None and log_time - f.first_log_time > self._max_duration_ns:
+            return True
+        if self._max_bytes is not None:
+            grows = data_bytes + _MESSAGE_RECORD_OVERHEAD + _INDEX_ENTRY + _INDEX_OVERHEAD
+            return f.size() + grows > self._max_bytes
+        return False
+
+    def _open_next(self) -> None:
+        path = split_path(self._path, len(self._paths))
+        self._file = _OpenFile(path, self._chunk_size, self._compression)
+        self._paths.append(path)
+
+    def _close_file(self) -> None:
+        f, self._file = self._file, None
+        if f is not None:
+            f.close()
+
+    @contextlib.contextmanager
+    def _deferred_signals(self) -> Iterator[None]:
+        if not self._defer or self._deferring or threading.get_ident() != _MAIN_THREAD_ID:
+            yield
+            return
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
+        self._deferring += 1
+        try:
+            yield
+        finally:
+            self._deferring -= 1
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+    @contextlib.contextmanager
+    def batch(self) -> Iterator[None]:
+        """A context for a group of writes (e.g. one simulation step): signals are
+        deferred once for the group, and other threads wait until it ends."""
+        with self._deferred_signals(), self._lock:
+            yield
+
+    # --------------------------------------------------------------- lifecycle
+    def flush(self) -> None:
+        """Write the open chunk to the file now (a smaller chunk, nothing lost on a kill)."""
+        with self._deferred_signals(), self._lock:
+            if not self._closed and self._file is not None:
+                self._file.flush()
+
+    def close(self) -> None:
+        """Finish the current file (summary, statistics, indexes). Idempotent."""
+        with self._deferred_signals(), self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            atexit.unregister(self.close)
+            self._close_file()
+
+    def __enter__(self) -> "McapRecorder":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open"
+        return f"McapRecorder({str(self._path)!r}, {state}, {self.message_count} messages in {len(self._paths)} files)"
+
+
+_DEFERRED = frozenset({signal.SIGINT, signal.SIGTERM})
+_MAIN_THREAD_ID = threading.main_thread().ident
+
+
+def _absolute(topic: str) -> str:
+    if not isinstance(topic, str) or not topic.strip("/"):
+        raise ValueError(f"not a topic name: {topic!r}")
+    return topic if topic.startswith("/") else "/" + topic
