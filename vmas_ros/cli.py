@@ -146,6 +146,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         ros_args += ["--params-file", str(path)]
     if args.scenario:
         ros_args += ["-p", f"scenario:={args.scenario}"]
+    if args.record:
+        ros_args += ["-p", f"record_path:={args.record}"]
     for item in args.param or []:
         if ":=" not in item:
             print(f"vmas-ros sim: -p expects name:=value, got {item!r}", file=sys.stderr)
@@ -204,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("sim", help="start sim_node (ROS 2) without ros2 launch")
     sim.add_argument("--config", default=None, help="ROS parameter file (e.g. config/simple_spread.yaml)")
     sim.add_argument("--scenario", default=None, help="scenario name (overrides the config)")
+    sim.add_argument("--record", default=None, help="record an MCAP bag to this .mcap path")
     sim.add_argument("-p", "--param", action="append", help="extra node parameter name:=value (repeatable)")
     sim.set_defaults(func=cmd_sim)
     echo = sub.add_parser("echo", help="print messages of a topic")

@@ -39,6 +39,10 @@ class SimParams:
     control: str = "zero"
     foxglove_port: int = 0
     foxglove_host: str = "127.0.0.1"
+    record_path: str = ""
+    record_topics: str = ""
+    record_max_mb: float = 0.0
+    record_max_duration_s: float = 0.0
 
     @staticmethod
     def names() -> List[str]:
@@ -47,6 +51,11 @@ class SimParams:
     def kwargs(self) -> Dict[str, Any]:
         """``scenario_kwargs`` parsed (validated beforehand)."""
         return yaml.safe_load(self.scenario_kwargs or "{}") or {}
+
+    def recorded_topics(self) -> Optional[List[str]]:
+        """The topics to record (None: everything the node publishes and receives)."""
+        names = [t.strip() for t in self.record_topics.split(",") if t.strip()]
+        return names or None
 
     def step_period(self, dt: float) -> float:
         """Wall-clock seconds between steps; 0 means as fast as possible.
@@ -111,6 +120,10 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
         return f"foxglove_port must be in [0, 65535] (0: off), got {value}"
     if name == "foxglove_host" and not value:
         return "foxglove_host must not be empty (127.0.0.1 keeps the server private to this machine)"
+    if name in ("record_max_mb", "record_max_duration_s") and value < 0:
+        return f"{name} must be >= 0 (0: no split), got {value}"
+    if name == "record_path" and value and not value.endswith(".mcap"):
+        return f"record_path must end in .mcap, got {value!r}"
     if name == "control" and value not in CONTROL_MODES:
         return f"control must be one of {', '.join(CONTROL_MODES)}, got {value!r}"
     return None

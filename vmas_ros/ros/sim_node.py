@@ -40,8 +40,9 @@ from sensor_msgs.msg import LaserScan
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from geometry_msgs.msg import TransformStamped
+
 try:  # a full ROS install has tf2_msgs; the PyPI wheels do not
-    from geometry_msgs.msg import TransformStamped
     from tf2_msgs.msg import TFMessage
 except ImportError:  # pragma: no cover - depends on the installation
     TFMessage = None
@@ -49,6 +50,12 @@ except ImportError:  # pragma: no cover - depends on the installation
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: a best-effort subscriber accepts reliable and best-effort publishers alike
 ACCEPT_ANY = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def _type_name(message) -> str:
+    """``pkg/msg/Name`` of a message instance (e.g. sensor_msgs/msg/LaserScan)."""
+    module = type(message).__module__.split(".")[0]
+    return f"{module}/msg/{type(message).__name__}"
 
 
 class ConfigError(ValueError):
@@ -81,6 +88,7 @@ class SimNode(Node):
         self._nonfinite_warned = 0.0
         self.rewards = None
         self.foxglove = self._start_foxglove()
+        self.recorder = self._start_recorder()
         self._publish()
         self._timer = self.create_timer(self.params.step_period(self.env.world.dt), self._tick)
         self.get_logger().info(
@@ -202,13 +210,44 @@ class SimNode(Node):
         self.get_logger().info(f"Foxglove: open {bridge.url} in Foxglove (layout: config/foxglove_layout.json)")
         return bridge
 
+    def _start_recorder(self):
+        """An MCAP bag of everything published and received, when ``record_path`` is set."""
+        p = self.params
+        if not p.record_path:
+            return None
+        from vmas_ros.record import McapRecorder
+
+        try:
+            recorder = McapRecorder(
+                p.record_path, topics=p.recorded_topics(),
+                max_bytes=int(p.record_max_mb * 1e6) or None, max_duration_s=p.record_max_duration_s or None,
+            )
+        except (OSError, ValueError) as error:
+            raise ConfigError(f"cannot record to {p.record_path!r}: {error}") from None
+        self.get_logger().info(f"recording to {p.record_path} (MCAP, rosbag2-compatible)")
+        return recorder
+
+    def _record(self, topic: str, message, qos: str = "reliable") -> None:
+        if self.recorder is not None:
+            self.recorder.write(self._topic(topic), _type_name(message), message, self.sim_time_ns, qos=qos)
+
+    def _topic(self, name: str) -> str:
+        return name if name.startswith("/") else f"/{name}"
+
     def _on_foxglove_twist(self, agent_index: int, vx: float, vy: float, wz: float) -> None:
         # runs on the Foxglove server's thread: one dict assignment, read by the step
         self._commands[agent_index] = (vx, vy, wz, time.monotonic())
+        if self.recorder is not None:  # the bag keeps every command, whichever way it came
+            twist = Twist()
+            twist.linear.x, twist.linear.y, twist.angular.z = vx, vy, wz
+            with self.recorder.batch():
+                self._record(f"{self.agent_names[agent_index]}/cmd_vel", twist, qos="best_effort")
 
     def destroy_node(self):
         if getattr(self, "foxglove", None) is not None:
             self.foxglove.close()
+        if getattr(self, "recorder", None) is not None:
+            self.recorder.close()  # the bag is finished and readable after SIGINT/SIGTERM
         return super().destroy_node()
 
     # ------------------------------------------------------------------ commands
@@ -224,6 +263,9 @@ class SimNode(Node):
                 )
             return
         self._commands[agent_index] = (*values, time.monotonic())
+        if self.recorder is not None:
+            with self.recorder.batch():
+                self._record(f"{self.agent_names[agent_index]}/cmd_vel", msg, qos="best_effort")
 
     def _actions(self) -> List[torch.Tensor]:
         env, p = self.env, self.params
@@ -258,10 +300,21 @@ class SimNode(Node):
         self._publish()
 
     def _publish(self) -> None:
+        if self.recorder is None:
+            self._publish_all()
+            return
+        with self.recorder.batch():  # one signal deferral and lock for the whole step
+            self._publish_all()
+
+    def _send(self, publisher, message) -> None:
+        publisher.publish(message)
+        self._record(publisher.topic_name, message)
+
+    def _publish_all(self) -> None:
         p = self.params
         stamp = _stamp(self.sim_time_ns)
         self.clock.clock = stamp
-        self.clock_pub.publish(self.clock)
+        self._send(self.clock_pub, self.clock)
         snap = convert.Snapshot.take(self.env.world, p.env_index, self.lidars)
         n_landmarks = len(self.env.world.landmarks)
         transforms = []
@@ -272,14 +325,14 @@ class SimNode(Node):
             pose.header.stamp = odom.header.stamp = stamp
             convert.set_pose(pose.pose, x, y, yaw)
             convert.fill_odometry(odom, x, y, yaw, snap.vel[k, 0], snap.vel[k, 1], snap.ang_vel[k])
-            self.pose_pubs[i].publish(pose)
-            self.odom_pubs[i].publish(odom)
+            self._send(self.pose_pubs[i], pose)
+            self._send(self.odom_pubs[i], odom)
             for j, ranges in enumerate(snap.scans.get(i, [])):
                 scan = self.scan_msgs[(i, j)]
                 scan.header.stamp = stamp
                 convert.fill_scan(scan, self.scan_geometry[i][j], ranges)
-                self.scan_pubs[(i, j)].publish(scan)
-            if self.tf_pub is not None:
+                self._send(self.scan_pubs[(i, j)], scan)
+            if self.tf_pub is not None or self.recorder is not None:
                 tf = TransformStamped()
                 tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, p.frame_id, f"{name}/base_link"
                 tf.transform.translation.x, tf.transform.translation.y = float(x), float(y)
@@ -287,8 +340,13 @@ class SimNode(Node):
                 r = tf.transform.rotation
                 r.x, r.y, r.z, r.w = q
                 transforms.append(tf)
-        if transforms:
-            self.tf_pub.publish(TFMessage(transforms=transforms))
+        if transforms and self.tf_pub is not None:
+            self._send(self.tf_pub, TFMessage(transforms=transforms))
+        elif transforms and self.recorder is not None:
+            # no tf2_msgs here: the bag still gets /tf, serialised from the message definition
+            from vmas_ros.record import TF_MESSAGE_TYPE, serialize_tf_message
+
+            self.recorder.write_raw("/tf", TF_MESSAGE_TYPE, serialize_tf_message(transforms), self.sim_time_ns)
         self._publish_arrays(snap, stamp, n_landmarks)
         if self.foxglove is not None:
             world = self.env.world
@@ -310,11 +368,11 @@ class SimNode(Node):
             for pose, k in zip(array.poses, rows):
                 convert.set_pose(pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
             array.header.stamp = stamp
-            pub.publish(array)
+            self._send(pub, array)
         for k, marker in enumerate(self.markers.markers):
             marker.header.stamp = stamp
             convert.set_pose(marker.pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
-        self.marker_pub.publish(self.markers)
+        self._send(self.marker_pub, self.markers)
 
     @property
     def sim_time_ns(self) -> int:
