@@ -56,3 +56,11 @@ def test_demo_reports_heuristic_beats_random(capsys):
 def test_list_names_the_scenarios(capsys):
     assert main(["list"]) == 0
     assert {"simple_spread", "waterfall"} <= set(capsys.readouterr().out.split())
+
+
+@pytest.mark.parametrize("scenario", __import__("vmas_ros").list_scenarios())
+def test_every_scenario_renders(scenario, tmp_path):
+    out = tmp_path / f"{scenario}.png"
+    assert main(["render", "--scenario", scenario, "--steps", "2", "--size", "120", "--quiet", "--out", str(out)]) == 0
+    image = np.asarray(Image.open(out).convert("RGB"))
+    assert image.shape == (120, 120, 3) and (image != 255).any()

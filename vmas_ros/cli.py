@@ -59,7 +59,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     import vmas_ros
-    from vmas_ros.scenarios import heuristic
+    from vmas_ros.scenarios import make_heuristic
 
     kwargs = _parse_kwargs(args.scenario_kwargs)
     try:
@@ -67,7 +67,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"vmas-ros demo: {error}", file=sys.stderr)
         return 2
-    policy = heuristic(args.scenario)(continuous_action=True)
+    policy = make_heuristic(args.scenario, **kwargs)
     print(f"scenario {args.scenario}: {env.n_agents} agents, {len(env.world.landmarks)} landmarks, "
           f"{args.num_envs} envs on {env.device}, {args.steps} steps")
     start = time.perf_counter()
@@ -95,7 +95,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     import vmas_ros
-    from vmas_ros.scenarios import heuristic
+    from vmas_ros.scenarios import make_heuristic
     from vmas_ros.viz.video import VIDEO_SUFFIXES, save_frames
 
     out = Path(args.out)
@@ -108,7 +108,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"vmas-ros render: {error}", file=sys.stderr)
         return 2
-    policy = None if args.random else heuristic(args.scenario)(continuous_action=True)
+    policy = None if args.random else make_heuristic(args.scenario, **_parse_kwargs(args.scenario_kwargs))
     obs = env.reset()
 
     def frame():

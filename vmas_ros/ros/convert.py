@@ -32,11 +32,12 @@ def yaw_to_quaternion(yaw: float) -> tuple:
     return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
 
 
-def rgb(color) -> tuple:
+def rgb(color, env_index: int = 0) -> tuple:
+    """(r, g, b) floats of an entity colour: a Color, a tuple, or a tensor ([3] or per-env [B, 3])."""
     if isinstance(color, Color):
         color = color.value
     if isinstance(color, torch.Tensor):
-        color = color.flatten()[:3].tolist()
+        color = (color[env_index] if color.dim() > 1 else color).flatten()[:3].tolist()
     return tuple(float(c) for c in color[:3])
 
 

@@ -29,7 +29,7 @@ import vmas_ros
 from vmas_ros.ros import convert
 from vmas_ros.ros.command import command_to_action
 from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, validate
-from vmas_ros.scenarios import heuristic
+from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.sensors import Lidar
 
 from builtin_interfaces.msg import Time
@@ -129,6 +129,10 @@ class SimNode(Node):
     # ------------------------------------------------------------------ building
     def _build_env(self) -> None:
         p = self.params
+        if p.num_envs <= 256 and torch.get_num_threads() > 1:
+            # small batches gain nothing from intra-op threads, and on a busy machine
+            # contended threads make tiny kernels take milliseconds: keep one
+            torch.set_num_threads(1)
         try:
             device = resolve_device(p.device)
             self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed, **p.kwargs())
@@ -142,7 +146,7 @@ class SimNode(Node):
                         world, n_rays=p.lidar_rays, max_range=p.lidar_range,
                         entity_filter=lambda e, me=agent: e.collides(me) and me.collides(e),
                     ))
-        self.policy = heuristic(p.scenario)(continuous_action=True)
+        self.policy = make_heuristic(p.scenario, **p.kwargs())
         self.obs = self.env.reset()
 
     def _build_io(self) -> None:
@@ -179,6 +183,7 @@ class SimNode(Node):
             convert.shape_marker(marker, entity, k, frame)
             self.markers.markers.append(marker)
         self.marker_pub = self.create_publisher(MarkerArray, "world/markers", RELIABLE)
+        self._per_env_colours = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
         self.clock_pub = self.create_publisher(Clock, "/clock", RELIABLE)
         self.clock = Clock()
         self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
@@ -300,15 +305,23 @@ class SimNode(Node):
         self._publish()
 
     def _publish(self) -> None:
-        if self.recorder is None:
-            self._publish_all()
-            return
-        with self.recorder.batch():  # one signal deferral and lock for the whole step
-            self._publish_all()
+        self._step_records = []
+        self._publish_all()
+        if self.recorder is not None:
+            # the whole step goes into the bag at once (signals deferred meanwhile), so a
+            # SIGINT/SIGTERM that interrupts publishing never leaves half a step in the bag
+            with self.recorder.batch():
+                for topic, message in self._step_records:
+                    self._record(topic, message)
+                if self._tf_bytes is not None:
+                    from vmas_ros.record import TF_MESSAGE_TYPE
+
+                    self.recorder.write_raw("/tf", TF_MESSAGE_TYPE, self._tf_bytes, self.sim_time_ns)
 
     def _send(self, publisher, message) -> None:
         publisher.publish(message)
-        self._record(publisher.topic_name, message)
+        if self.recorder is not None:
+            self._step_records.append((publisher.topic_name, message))
 
     def _publish_all(self) -> None:
         p = self.params
@@ -340,13 +353,14 @@ class SimNode(Node):
                 r = tf.transform.rotation
                 r.x, r.y, r.z, r.w = q
                 transforms.append(tf)
+        self._tf_bytes = None
         if transforms and self.tf_pub is not None:
             self._send(self.tf_pub, TFMessage(transforms=transforms))
         elif transforms and self.recorder is not None:
             # no tf2_msgs here: the bag still gets /tf, serialised from the message definition
-            from vmas_ros.record import TF_MESSAGE_TYPE, serialize_tf_message
+            from vmas_ros.record import serialize_tf_message
 
-            self.recorder.write_raw("/tf", TF_MESSAGE_TYPE, serialize_tf_message(transforms), self.sim_time_ns)
+            self._tf_bytes = serialize_tf_message(transforms)
         self._publish_arrays(snap, stamp, n_landmarks)
         if self.foxglove is not None:
             world = self.env.world
@@ -369,6 +383,10 @@ class SimNode(Node):
                 convert.set_pose(pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
             array.header.stamp = stamp
             self._send(pub, array)
+        entities = self.env.world.entities
+        for k in self._per_env_colours:  # e.g. goal colours drawn per env at reset
+            colour = self.markers.markers[k].color
+            colour.r, colour.g, colour.b = convert.rgb(entities[k].color, self.params.env_index)
         for k, marker in enumerate(self.markers.markers):
             marker.header.stamp = stamp
             convert.set_pose(marker.pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])

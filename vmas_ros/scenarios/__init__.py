@@ -11,7 +11,15 @@ from typing import Dict, List
 
 #: name -> module path holding ``Scenario`` (and ``HeuristicPolicy``)
 REGISTRY: Dict[str, str] = {
+    "simple": "vmas_ros.scenarios.mpe.simple",
+    "simple_adversary": "vmas_ros.scenarios.mpe.simple_adversary",
+    "simple_crypto": "vmas_ros.scenarios.mpe.simple_crypto",
+    "simple_push": "vmas_ros.scenarios.mpe.simple_push",
+    "simple_reference": "vmas_ros.scenarios.mpe.simple_reference",
+    "simple_speaker_listener": "vmas_ros.scenarios.mpe.simple_speaker_listener",
     "simple_spread": "vmas_ros.scenarios.mpe.simple_spread",
+    "simple_tag": "vmas_ros.scenarios.mpe.simple_tag",
+    "simple_world_comm": "vmas_ros.scenarios.mpe.simple_world_comm",
     "waterfall": "vmas_ros.scenarios.waterfall",
 }
 
@@ -36,6 +44,23 @@ def _module(name: str):
 def load(name: str):
     """A new ``Scenario`` instance of the registered scenario ``name``."""
     return _module(name).Scenario()
+
+
+def make_heuristic(name: str, continuous_action: bool = True, **scenario_kwargs):
+    """An instance of scenario ``name``'s heuristic, given the scenario kwargs it needs.
+
+    Some heuristics read their observation layout from the scenario's kwargs
+    (e.g. simple_tag's team sizes); they get the kwargs they accept, the others none.
+    """
+    import inspect
+
+    policy_class = heuristic(name)
+    parameters = inspect.signature(policy_class.__init__).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        accepted = dict(scenario_kwargs)
+    else:
+        accepted = {k: v for k, v in scenario_kwargs.items() if k in parameters}
+    return policy_class(continuous_action=continuous_action, **accepted)
 
 
 def heuristic(name: str):

@@ -63,7 +63,7 @@ class Scenario(BaseScenario):
         if agent is self.world.agents[0]:
             agents, landmarks = self._positions()
             n_agents = agents.shape[1]
-            coverage = torch.cdist(agents, landmarks).min(dim=1).values.sum(dim=-1)  # [B]
+            coverage = torch.cdist(agents, landmarks).amin(dim=1).sum(dim=-1)  # [B]
             radii = torch.tensor([a.shape.radius for a in self.world.agents], device=agents.device)
             collides = torch.tensor([a.collide for a in self.world.agents], device=agents.device)
             gaps = torch.linalg.vector_norm(agents.unsqueeze(2) - agents.unsqueeze(1), dim=-1)
