@@ -37,6 +37,7 @@ setup(
         "record": ["mcap", "mcap-ros2-support"],
         "train": ["torchrl", "onnx", "onnxruntime", "matplotlib"],
         "play": ["pygame"],
+        "bench": ["matplotlib"],
         "test": [
             "pytest",
             "pytest-timeout",
@@ -47,6 +48,7 @@ setup(
             "hypothesis",
             "websockets",
             "pygame",
+            "matplotlib",
         ],
     },
     entry_points={

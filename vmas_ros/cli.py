@@ -5,6 +5,7 @@ Subcommands:
     demo    a short headless run of a scenario's heuristic: prints what happened
             (reward against random actions, speed) and optionally saves a picture
     play    drive a scenario's agents with the keyboard (pygame window)
+    bench   benchmarks against upstream VMAS and MPE (speed ratios, CSV/JSON/PNG)
     render  roll out a scenario and save it as a GIF, MP4 or PNG
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
@@ -191,6 +192,11 @@ def build_parser() -> argparse.ArgumentParser:
     play = sub.add_parser("play", help="drive agents with the keyboard in a pygame window")
     add_play_arguments(play)
     play.set_defaults(func=run_play_command)
+    from vmas_ros.bench.mpe import add_bench_arguments, run_bench_command
+
+    bench = sub.add_parser("bench", help="benchmarks (mpe: the VMAS paper's Figure 2, against VMAS and MPE)")
+    add_bench_arguments(bench)
+    bench.set_defaults(func=run_bench_command)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
     render.add_argument("--scenario", default="simple_spread", help="scenario name")
     render.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")
@@ -226,7 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    if (getattr(args, "num_envs", 1) or 1) < 1 or (getattr(args, "steps", 1) or 1) < 1:
+    num_envs, steps = getattr(args, "num_envs", 1), getattr(args, "steps", 1)
+    if (isinstance(num_envs, int) and num_envs < 1) or (isinstance(steps, int) and steps < 1):
         print("vmas-ros: --num-envs and --steps must be >= 1", file=sys.stderr)
         return 2
     return args.func(args)

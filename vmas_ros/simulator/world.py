@@ -360,5 +360,5 @@ class World:
             else:
                 length = torch.tensor([e.shape.length for e in group], device=self._device)
                 d = raycast.ray_segment(origin, ray_angles, pos, rot, length, max_range)
-            dists.append(d.min(dim=-1).values)
-        return torch.stack(dists, dim=-1).min(dim=-1).values
+            dists.append(d.amin(dim=-1))
+        return torch.stack(dists, dim=-1).amin(dim=-1)

@@ -115,7 +115,7 @@ class Scenario(BaseScenario):
             to_goal = torch.linalg.vector_norm(agents - goal.unsqueeze(1), dim=-1)  # [B, N]
             adv = self._adversary
             self._rewards = torch.where(
-                adv, to_goal[:, ~adv].min(dim=1, keepdim=True).values - to_goal, -to_goal
+                adv, to_goal[:, ~adv].amin(dim=1, keepdim=True) - to_goal, -to_goal
             )
         return self._rewards[:, self._index[agent.name]]
 

@@ -147,7 +147,7 @@ class Scenario(BaseScenario):
         if self.shape_agent_rew:
             good_rew = good_rew + SHAPING_WEIGHT * gap.sum(dim=1)
         if self.shape_adversary_rew:
-            adv_rew = adv_rew - SHAPING_WEIGHT * gap.min(dim=2).values
+            adv_rew = adv_rew - SHAPING_WEIGHT * gap.amin(dim=2)
         if self.agents_share_rew:
             good_rew = good_rew.sum(dim=1, keepdim=True).expand_as(good_rew)
         if self.adversaries_share_rew:
