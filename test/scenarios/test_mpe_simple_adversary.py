@@ -9,43 +9,27 @@ import numpy as np
 import pytest
 import torch
 
-import vmas
-import vmas_ros
+from test.scenarios import harness
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_adversary as scenario
 
 NAME = "simple_adversary"
 BATCH = 16
-FIELDS = ("pos", "vel", "rot", "ang_vel")
 KWARGS = [{}, {"n_agents": 5, "n_adversaries": 2}]
 
 
 def _make(num_envs: int = BATCH, seed: int = 0, **kwargs):
-    return vmas_ros.make_env(scenario.Scenario(), num_envs=num_envs, device="cpu", seed=seed, **kwargs)
+    return harness.make(scenario.Scenario(), num_envs, seed, **kwargs)
 
 
-def _space(space):
-    """A plain description of a space, comparable between gym (upstream) and gymnasium (ours)."""
-    kind = type(space).__name__
-    if kind == "Tuple":
-        return kind, [_space(s) for s in space.spaces]
-    if kind == "Dict":
-        return kind, {k: _space(s) for k, s in space.spaces.items()}
-    if kind == "Box":
-        return kind, tuple(space.shape), space.low.tolist(), space.high.tolist()
-    if kind == "Discrete":
-        return kind, int(space.n)
-    return kind, np.asarray(space.nvec).tolist()
-
-
-def _state(env) -> torch.Tensor:
-    """[B, ...] everything a reset redraws: positions of all entities and the goal."""
-    pos = torch.stack([e.state.pos for e in env.world.entities], dim=1).flatten(1)
-    return torch.cat([pos, env.scenario.goal.unsqueeze(-1).float()], dim=-1)
+def _goal(env):
+    """The per-env scenario state a reset redraws (besides positions): the goal landmark."""
+    return {"goal": env.scenario.goal}
 
 
 # ------------------------------------------------------------------ construction
 def test_default_world_matches_upstream_facts():
-    env, up = _make(), vmas.make_env(NAME, num_envs=2, seed=0)
+    env, up = _make(), harness.make_upstream(NAME, 2)
     assert [e.name for e in env.world.entities] == [e.name for e in up.world.entities]
     for ours, theirs in zip(env.world.entities, up.world.entities):
         assert ours.shape.radius == theirs.shape.radius and ours.collide == theirs.collide == False  # noqa: E712
@@ -65,30 +49,11 @@ def test_kwargs_and_validation():
 
 
 # ------------------------------------------------------------------------ spaces
-MODES = {
-    "continuous": dict(),
-    "discrete": dict(continuous_actions=False),
-    "multidiscrete": dict(continuous_actions=False, multidiscrete_actions=True),
-    "dict": dict(dict_spaces=True),
-}
-
-
 @pytest.mark.parametrize("kwargs", KWARGS)
-@pytest.mark.parametrize("mode", MODES.values(), ids=MODES.keys())
+@pytest.mark.parametrize("mode", harness.SPACE_MODES.values(), ids=harness.SPACE_MODES.keys())
 def test_spaces_equal_upstream_and_steps_work(kwargs, mode):
     env = _make(num_envs=4, **kwargs, **mode)
-    up = vmas.make_env(NAME, num_envs=4, seed=0, **kwargs, **mode)
-    assert _space(env.observation_space) == _space(up.observation_space)
-    assert _space(env.action_space) == _space(up.action_space)
-    for _ in range(3):
-        actions = env.get_random_actions()
-        if mode.get("dict_spaces"):
-            actions = {a.name: act for a, act in zip(env.agents, actions)}
-        obs, rews, _, _ = env.step(actions)
-    if isinstance(obs, dict):
-        assert all(obs[name].shape == (4, *space.shape) for name, space in env.observation_space.spaces.items())
-    else:
-        assert all(o.shape == (4, *space.shape) for o, space in zip(obs, env.observation_space.spaces))
+    harness.check_spaces(env, harness.make_upstream(NAME, 4, **kwargs, **mode), 3, as_dict="dict_spaces" in mode)
 
 
 # ------------------------------------------------------------------------ resets
@@ -96,18 +61,9 @@ def test_spaces_equal_upstream_and_steps_work(kwargs, mode):
 def test_reset_at_touches_exactly_those_envs(index):
     env = _make()
     env.step(env.get_random_actions())
-    if index == "mask":
-        index = torch.arange(BATCH) % 3 == 1
-    chosen = torch.zeros(BATCH, dtype=torch.bool)
-    chosen[index] = True
-    before = _state(env)
-    env.reset_at(index)
-    after = _state(env)
-    assert torch.equal(after[~chosen], before[~chosen])
-    moved = (after[chosen, :-1] != before[chosen, :-1]).all(dim=-1)
-    assert moved.all()
+    chosen = harness.check_reset_at(env, index, mask_rows=slice(1, None, 3), scenario_state=_goal).chosen
     agent_vel = torch.stack([a.state.vel for a in env.agents], dim=1)
-    assert (agent_vel[chosen] == 0).all() and (agent_vel[~chosen] != 0).any()
+    assert (agent_vel[~chosen] != 0).any()  # so the other envs' velocities were really kept
     colors = torch.stack([l.color for l in env.world.landmarks], dim=1)  # [B, L, 3]
     green = colors[..., 1] > colors[..., 0]  # [B, L]
     assert (green.sum(-1) == 1).all() and torch.equal(green.float().argmax(-1), env.scenario.goal)
@@ -122,35 +78,23 @@ def test_goal_is_drawn_per_env():
 @pytest.mark.parametrize("policy", ["random", "heuristic"])
 def test_long_rollouts_stay_finite(policy):
     env = _make(n_agents=4, n_adversaries=1)
-    heuristic = scenario.HeuristicPolicy()
-    obs = env.reset()
-    for _ in range(200):
-        actions = env.get_random_actions() if policy == "random" else [heuristic.compute_action(o, 1.0) for o in obs]
-        obs, rews, _, _ = env.step(actions)
-        assert all(torch.isfinite(t).all() for t in obs + rews)
+    act = None if policy == "random" else scenario.HeuristicPolicy().compute_action  # None: random actions
+    harness.play_lineups(env, [[act] * env.n_agents], steps=200)
 
 
 # ------------------------------------------------------------------------ parity
-@pytest.mark.parametrize("kwargs", KWARGS)
-def test_parity_with_upstream_vmas(kwargs):
-    up = vmas.make_env(NAME, num_envs=BATCH, device="cpu", seed=0, **kwargs)
-    env = _make(**kwargs)
-    for e_up, e_ours in zip(up.world.entities, env.world.entities):
-        for field in FIELDS:
-            getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
+def _copy_goal(up, ours) -> None:
     # upstream keeps one goal Landmark for the whole batch on every agent (agent.goal);
     # ours keeps a landmark index per env, so every env gets upstream's goal
-    env.scenario.goal[:] = up.world.landmarks.index(up.world.agents[0].goal)
-    gen = torch.Generator().manual_seed(7)
-    for step in range(50):
-        actions = [torch.rand(BATCH, 2, generator=gen) * 2 - 1 for _ in up.agents]
-        obs_up, rew_up, _, _ = up.step([a.clone() for a in actions])
-        obs, rew, _, _ = env.step(actions)
-        for e_up, e_ours in zip(up.world.entities, env.world.entities):
-            for field in FIELDS:
-                torch.testing.assert_close(getattr(e_ours.state, field), getattr(e_up.state, field), atol=1e-4, rtol=0)
-        for mine, theirs in zip(obs + rew, obs_up + rew_up):
-            torch.testing.assert_close(mine, theirs, atol=1e-4, rtol=0, msg=lambda m: f"step {step}: {m}")
+    ours.scenario.goal[:] = up.world.landmarks.index(up.world.agents[0].goal)
+
+
+@pytest.mark.parametrize("kwargs", KWARGS)
+def test_parity_with_upstream_vmas(kwargs):
+    up, env = harness.make_upstream(NAME, BATCH, **kwargs), _make(**kwargs)
+    harness.copy_start(up, env, _copy_goal)
+    # actions uniform in [-1, 1] (u_range is 1); every state field within 1e-4, absolute only
+    run_lockstep(up, env, seed=7, rtol=0)
 
 
 # --------------------------------------------------------------- MPE semantics
@@ -166,14 +110,11 @@ def test_rewards_and_observations_match_mpe():
     cases = 12
     env = _make(num_envs=cases, seed=5)
     obs, rew, _, _ = env.step([torch.zeros(cases, 2) for _ in env.agents])
-    mpe = simple_adversary_v3.parallel_env(N=2, continuous_actions=True, max_cycles=1000)
-    mpe.reset(seed=0)
-    world = mpe.unwrapped.world
-    assert [a.name for a in world.agents] == [a.name for a in env.agents]
+    mpe, world, _ = harness.make_mpe(
+        simple_adversary_v3.parallel_env, env, N=2, continuous_actions=True, max_cycles=1000
+    )
     for k in range(cases):
-        for e_mpe, e_ours in zip(world.agents + world.landmarks, env.world.agents + env.world.landmarks):
-            e_mpe.state.p_pos = e_ours.state.pos[k].double().numpy().copy()
-            e_mpe.state.p_vel = np.zeros(2)
+        harness.copy_env_to_mpe(env, world, k, velocities=False)
         for agent in world.agents:
             agent.goal_a = world.landmarks[int(env.scenario.goal[k])]
         obs_mpe, rew_mpe, *_ = mpe.step({name: np.zeros(5, dtype=np.float32) for name in mpe.agents})
@@ -185,18 +126,9 @@ def test_rewards_and_observations_match_mpe():
 # -------------------------------------------------------------------- heuristic
 def _team_returns(good_heuristic: bool, adversary_heuristic: bool, num_envs=64, steps=100):
     env = _make(num_envs=num_envs, seed=1)
-    policy = scenario.HeuristicPolicy()
-    obs = env.reset()
-    total = torch.zeros(env.n_agents)
-    for _ in range(steps):
-        random_actions = env.get_random_actions()
-        actions = [
-            policy.compute_action(o, 1.0) if (adversary_heuristic if a.adversary else good_heuristic) else r
-            for a, o, r in zip(env.agents, obs, random_actions)
-        ]
-        obs, rews, _, _ = env.step(actions)
-        total += torch.stack(rews, dim=1).mean(dim=0)
-    return float(total[0]), float(total[1])  # adversary, good team
+    heuristic = lambda a: adversary_heuristic if a.adversary else good_heuristic  # noqa: E731
+    returns = harness.team_returns(env, scenario.HeuristicPolicy(), heuristic, steps)
+    return returns[0], returns[1]  # adversary, good team
 
 
 def test_heuristic_beats_random():

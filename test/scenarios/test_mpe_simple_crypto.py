@@ -10,32 +10,17 @@ import numpy as np
 import pytest
 import torch
 
-import vmas
-import vmas_ros
+from test.scenarios import harness
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_crypto as scenario
 
 NAME = "simple_crypto"
 BATCH = 16
-FIELDS = ("pos", "vel", "rot", "ang_vel")
 KWARGS = [{}, {"dim_c": 6}]
 
 
 def _make(num_envs: int = BATCH, seed: int = 0, **kwargs):
-    return vmas_ros.make_env(scenario.Scenario(), num_envs=num_envs, device="cpu", seed=seed, **kwargs)
-
-
-def _space(space):
-    """A plain description of a space, comparable between gym (upstream) and gymnasium (ours)."""
-    kind = type(space).__name__
-    if kind == "Tuple":
-        return kind, [_space(s) for s in space.spaces]
-    if kind == "Dict":
-        return kind, {k: _space(s) for k, s in space.spaces.items()}
-    if kind == "Box":
-        return kind, tuple(space.shape), space.low.tolist(), space.high.tolist()
-    if kind == "Discrete":
-        return kind, int(space.n)
-    return kind, np.asarray(space.nvec).tolist()
+    return harness.make(scenario.Scenario(), num_envs, seed, **kwargs)
 
 
 def _messages(num_envs: int, dim_c: int, gen: torch.Generator) -> torch.Tensor:
@@ -46,7 +31,7 @@ def _messages(num_envs: int, dim_c: int, gen: torch.Generator) -> torch.Tensor:
 
 # ------------------------------------------------------------------ construction
 def test_default_world_matches_upstream_facts():
-    env, up = _make(), vmas.make_env(NAME, num_envs=2, seed=0)
+    env, up = _make(), harness.make_upstream(NAME, 2)
     assert [a.name for a in env.agents] == [a.name for a in up.agents] == ["eve_0", "bob_0", "alice_0"]
     assert [a.adversary for a in env.agents] == [a.adversary for a in up.agents]
     assert [a.speaker for a in env.agents] == [a.speaker for a in up.agents]
@@ -66,57 +51,30 @@ def test_kwargs_and_validation():
 
 
 # ------------------------------------------------------------------------ spaces
-MODES = {
-    "continuous": dict(),
-    "discrete": dict(continuous_actions=False),
-    "multidiscrete": dict(continuous_actions=False, multidiscrete_actions=True),
-    "dict": dict(dict_spaces=True),
-}
-
-
 @pytest.mark.parametrize("kwargs", KWARGS)
-@pytest.mark.parametrize("mode", MODES.values(), ids=MODES.keys())
+@pytest.mark.parametrize("mode", harness.SPACE_MODES.values(), ids=harness.SPACE_MODES.keys())
 def test_spaces_equal_upstream_and_steps_work(kwargs, mode):
     env = _make(num_envs=4, **kwargs, **mode)
-    up = vmas.make_env(NAME, num_envs=4, seed=0, **kwargs, **mode)
-    assert _space(env.observation_space) == _space(up.observation_space)
-    assert _space(env.action_space) == _space(up.action_space)
-    for _ in range(3):
-        actions = env.get_random_actions()
-        if mode.get("dict_spaces"):
-            actions = {a.name: act for a, act in zip(env.agents, actions)}
-        obs, rews, _, _ = env.step(actions)
-    if isinstance(obs, dict):
-        assert all(obs[name].shape == (4, *space.shape) for name, space in env.observation_space.spaces.items())
-    else:
-        assert all(o.shape == (4, *space.shape) for o, space in zip(obs, env.observation_space.spaces))
+    harness.check_spaces(env, harness.make_upstream(NAME, 4, **kwargs, **mode), 3, as_dict="dict_spaces" in mode)
     if not env.continuous_actions:  # a discrete message is one-hot
         said = torch.stack([a.state.c for a in env.agents])
         assert ((said == 0) | (said == 1)).all() and (said.sum(-1) == 1).all()
 
 
 # ------------------------------------------------------------------------ resets
+def _secrets_and_messages(env):
+    """The per-env scenario state a reset redraws (secret, key) or clears (messages)."""
+    said = torch.stack([a.state.c for a in env.agents], dim=1).flatten(1)
+    return {"secret": env.scenario.secret, "key": env.scenario.key, "said": said}
+
+
 @pytest.mark.parametrize("index", [3, [0, 5, 6], "mask"], ids=["int", "list", "mask"])
 def test_reset_at_touches_exactly_those_envs(index):
     env = _make()
     env.step([_messages(BATCH, 4, torch.Generator().manual_seed(0)).clamp_min(0.1) for _ in env.agents])
-    if index == "mask":
-        index = torch.arange(BATCH) % 3 == 1
-    chosen = torch.zeros(BATCH, dtype=torch.bool)
-    chosen[index] = True
-
-    def snapshot():
-        pos = torch.stack([a.state.pos for a in env.agents], dim=1).flatten(1)
-        said = torch.stack([a.state.c for a in env.agents], dim=1).flatten(1)
-        return pos, torch.cat([env.scenario.secret, env.scenario.key, said], dim=-1)
-
-    pos_before, rest_before = snapshot()
-    env.reset_at(index)
-    pos_after, rest_after = snapshot()
-    assert torch.equal(pos_after[~chosen], pos_before[~chosen])
-    assert torch.equal(rest_after[~chosen], rest_before[~chosen])
-    assert (pos_after[chosen] != pos_before[chosen]).all()
-    said = rest_after[:, 8:]
+    assert not env.world.landmarks  # so the entities checked below are the agents
+    seen = harness.check_reset_at(env, index, mask_rows=slice(1, None, 3), scenario_state=_secrets_and_messages)
+    chosen, said = seen.chosen, seen.after["said"]
     assert (said[chosen] == 0).all() and (said[~chosen] != 0).all()  # messages cleared by the reset
 
 
@@ -131,43 +89,35 @@ def test_secret_and_key_are_random_bits_per_env():
 @pytest.mark.parametrize("policy", ["random", "heuristic"])
 def test_long_rollouts_stay_finite(policy):
     env = _make()
-    heuristic = scenario.HeuristicPolicy()
-    obs = env.reset()
-    for _ in range(200):
-        actions = env.get_random_actions() if policy == "random" else [heuristic.compute_action(o, 1.0) for o in obs]
-        obs, rews, _, _ = env.step(actions)
-        assert all(torch.isfinite(t).all() for t in obs + rews)
+    act = None if policy == "random" else scenario.HeuristicPolicy().compute_action  # None: random actions
+    harness.play_lineups(env, [[act] * env.n_agents], steps=200)
 
 
 # ------------------------------------------------------------------------ parity
+def _copy_secret_and_key(up, ours) -> None:
+    # upstream: one shared long tensor agent.secret on every agent, the key on the speaker (agents[2])
+    ours.scenario.secret[:] = up.world.agents[0].secret.float()
+    ours.scenario.key[:] = up.world.agents[2].key.float()
+
+
 @pytest.mark.parametrize("kwargs", KWARGS)
 @pytest.mark.parametrize("continuous", [True, False], ids=["continuous", "discrete"])
 def test_parity_with_upstream_vmas(kwargs, continuous):
-    up = vmas.make_env(NAME, num_envs=BATCH, device="cpu", seed=0, continuous_actions=continuous, **kwargs)
+    up = harness.make_upstream(NAME, BATCH, continuous_actions=continuous, **kwargs)
     env = _make(continuous_actions=continuous, **kwargs)
-    for e_up, e_ours in zip(up.world.entities, env.world.entities):
-        for field in FIELDS:
-            getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
-    # upstream: one shared long tensor agent.secret on every agent, the key on the speaker (agents[2])
-    env.scenario.secret[:] = up.world.agents[0].secret.float()
-    env.scenario.key[:] = up.world.agents[2].key.float()
+    harness.copy_start(up, env, _copy_secret_and_key)
     dim_c = env.world.dim_c
-    gen = torch.Generator().manual_seed(11)
-    for step in range(50):
+
+    def actions(gen):
         if continuous:  # random physical part (ignored: agents are immovable) and messages, some silent
             actions = [_messages(BATCH, dim_c, gen) for _ in up.agents]
             for action in actions:
                 action[:, :2] = torch.rand(BATCH, 2, generator=gen) * 2 - 1
-        else:
-            actions = [torch.randint(0, 9 * dim_c, (BATCH, 1), generator=gen) for _ in up.agents]
-        obs_up, rew_up, _, _ = up.step([a.clone() for a in actions])
-        obs, rew, _, _ = env.step(actions)
-        for a_up, a_ours in zip(up.agents, env.agents):
-            torch.testing.assert_close(a_ours.state.c, a_up.state.c, atol=1e-6, rtol=0)
-            for field in FIELDS:
-                torch.testing.assert_close(getattr(a_ours.state, field), getattr(a_up.state, field), atol=1e-4, rtol=0)
-        for mine, theirs in zip(obs + rew, obs_up + rew_up):
-            torch.testing.assert_close(mine, theirs.float(), atol=1e-4, rtol=0, msg=lambda m: f"step {step}: {m}")
+            return actions
+        return [torch.randint(0, 9 * dim_c, (BATCH, 1), generator=gen) for _ in up.agents]
+
+    # every state field within 1e-4, absolute only; every agent's messages within 1e-6
+    run_lockstep(up, env, seed=11, actions=actions, rtol=0, speakers=range(len(env.agents)), message_atol=1e-6)
 
 
 # --------------------------------------------------------------- MPE semantics
@@ -187,10 +137,7 @@ def test_rewards_and_observations_match_mpe():
     gen = torch.Generator().manual_seed(2)
     actions = [_messages(cases, 4, gen) for _ in env.agents]
     obs, rew, _, _ = env.step(actions)
-    mpe = simple_crypto_v3.parallel_env(continuous_actions=True, max_cycles=1000)
-    mpe.reset(seed=0)
-    world = mpe.unwrapped.world
-    assert [a.name for a in world.agents] == [a.name for a in env.agents]
+    mpe, world, _ = harness.make_mpe(simple_crypto_v3.parallel_env, env, continuous_actions=True, max_cycles=1000)
     for k in range(cases):
         world.landmarks[0].color = env.scenario.secret[k].double().numpy().copy()
         for agent in world.agents:
@@ -220,18 +167,9 @@ def test_heuristic_bob_decodes_and_eve_guesses_half(dim_c):
 
 def _returns(good_heuristic: bool, eve_heuristic: bool, num_envs=64, steps=100):
     env = _make(num_envs=num_envs, seed=1)
-    policy = scenario.HeuristicPolicy()
-    obs = env.reset()
-    total = torch.zeros(env.n_agents)
-    for _ in range(steps):
-        random_actions = env.get_random_actions()
-        actions = [
-            policy.compute_action(o, 1.0) if (eve_heuristic if a.adversary else good_heuristic) else r
-            for a, o, r in zip(env.agents, obs, random_actions)
-        ]
-        obs, rews, _, _ = env.step(actions)
-        total += torch.stack(rews, dim=1).mean(dim=0)
-    return float(total[0]), float(total[1])  # Eve, Alice and Bob
+    heuristic = lambda a: eve_heuristic if a.adversary else good_heuristic  # noqa: E731
+    returns = harness.team_returns(env, scenario.HeuristicPolicy(), heuristic, steps)
+    return returns[0], returns[1]  # Eve, Alice and Bob
 
 
 def test_heuristic_beats_random():

@@ -8,17 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-import vmas
 from mpe2 import simple_push_v3
 
-import vmas_ros
-from test.scenarios.test_mpe_simple import (
-    ACTION_MODES,
-    assert_same_space,
-    copy_start,
-    play_lineups,
-    run_parity,
-)
+from test.scenarios import harness
+from test.scenarios.harness import ACTION_MODES
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_push
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
@@ -27,7 +21,7 @@ BATCH = 16
 
 
 def make(num_envs: int = BATCH, **kwargs):
-    return vmas_ros.make_env(simple_push.Scenario(), num_envs=num_envs, device="cpu", seed=0, **kwargs)
+    return harness.make(simple_push.Scenario(), num_envs, **kwargs)
 
 
 def expected_agent_color(goal: torch.Tensor) -> torch.Tensor:
@@ -62,12 +56,7 @@ def test_unknown_kwargs_warn():
 @pytest.mark.parametrize("mode", list(ACTION_MODES))
 def test_spaces_match_upstream_and_actions_work(mode, dict_spaces):
     options = dict(ACTION_MODES[mode], dict_spaces=dict_spaces)
-    up = vmas.make_env(NAME, num_envs=4, device="cpu", seed=0, **options)
-    ours = make(4, **options)
-    assert_same_space(ours.observation_space, up.observation_space, "observation_space")
-    assert_same_space(ours.action_space, up.action_space, "action_space")
-    for _ in range(3):
-        obs, _, _, _ = ours.step(ours.get_random_actions())
+    obs, _ = harness.check_spaces(make(4, **options), harness.make_upstream(NAME, 4, **options), steps=3)
     values = list(obs.values()) if dict_spaces else obs
     assert [tuple(v.shape) for v in values] == [(4, 8), (4, 19)] and all(torch.isfinite(v).all() for v in values)
 
@@ -78,20 +67,9 @@ def test_reset_at_resets_exactly_those_envs(index):
     env = make(32)
     for _ in range(5):
         env.step([torch.ones(32, 2)] * 2)
-    chosen = torch.zeros(32, dtype=torch.bool)
-    if index == "mask":
-        index = chosen.clone()
-        index[::2] = True
-    chosen[torch.as_tensor(index)] = True
-    before = {e.name: (e.state.pos.clone(), e.state.vel.clone()) for e in env.world.entities}
-    goal_before = env.scenario.goal_index.clone()
-    env.reset_at(index)
-    for e in env.world.entities:
-        pos, vel = before[e.name]
-        assert torch.equal(e.state.pos[~chosen], pos[~chosen]) and torch.equal(e.state.vel[~chosen], vel[~chosen])
-        assert (e.state.pos[chosen] != pos[chosen]).all() and (e.state.vel[chosen] == 0).all()
+    goal_of = lambda env: {"goal": env.scenario.goal_index}  # noqa: E731 (kept in the other envs)
+    chosen = harness.check_reset_at(env, index, mask_rows=slice(None, None, 2), scenario_state=goal_of).chosen
     goal = env.scenario.goal_index
-    assert torch.equal(goal[~chosen], goal_before[~chosen])
     torch.testing.assert_close(env.agents[1].color, expected_agent_color(goal))
     if chosen.sum() > 8:
         assert set(goal[chosen].tolist()) == {0, 1}  # redrawn, not copied
@@ -100,20 +78,21 @@ def test_reset_at_resets_exactly_those_envs(index):
 def test_long_rollouts_stay_finite():
     """200 steps, half the envs on random actions, half on the heuristic."""
     random, heuristic = RandomPolicy().compute_action, simple_push.HeuristicPolicy().compute_action
-    play_lineups(make(8), [[random, random], [heuristic, heuristic]], steps=200)
+    harness.play_lineups(make(8), [[random, random], [heuristic, heuristic]], steps=200)
 
 
 # ------------------------------------------------------------------------- parity
+def copy_goal(up, ours) -> None:
+    """Besides positions, upstream randomises the goal landmark at reset (one for the
+    whole batch); the good agent's reward, observation and colour depend on it."""
+    ours.scenario.set_goal(torch.tensor(up.world.landmarks.index(up.world.agents[1].goal)))
+
+
 def test_matches_upstream_vmas():
-    up = vmas.make_env(NAME, num_envs=BATCH, device="cpu", seed=0)
-    ours = make()
-    copy_start(up, ours)
-    # Besides positions, upstream randomises the goal landmark at reset (one for the
-    # whole batch); the good agent's reward, observation and colour depend on it.
-    goal = up.world.landmarks.index(up.world.agents[1].goal)
-    ours.scenario.set_goal(torch.tensor(goal))
+    up, ours = harness.make_upstream(NAME, BATCH), make()
+    harness.copy_start(up, ours, copy_goal)
     torch.testing.assert_close(ours.agents[1].color[0], up.world.agents[1].color)
-    run_parity(up, ours)
+    run_lockstep(up, ours, seed=0)
 
 
 def test_set_goal_selected_envs():
@@ -141,10 +120,8 @@ def test_rewards_and_observations_match_mpe():
     n = 24
     gen = torch.Generator().manual_seed(5)
     ours = make(n)
-    mpe = simple_push_v3.parallel_env(continuous_actions=True, max_cycles=10)
-    world, scenario = mpe.unwrapped.world, mpe.unwrapped.scenario
+    mpe, world, scenario = harness.make_mpe(simple_push_v3.parallel_env, ours, continuous_actions=True, max_cycles=10)
     names = [a.name for a in world.agents]
-    assert names == [a.name for a in ours.agents]
     goals, states, rew_mpe, obs_mpe = [], [], [], []
     for k in range(n):
         mpe.reset(seed=k)
@@ -207,7 +184,7 @@ def test_heuristic_beats_random():
     torch.manual_seed(0)
     heuristic, rand = simple_push.HeuristicPolicy().compute_action, RandomPolicy().compute_action
     lineups = [[rand, heuristic], [rand, rand], [heuristic, heuristic]]
-    returns = torch.cat([play_lineups(make(64), [lineup]) for lineup in lineups], dim=1)
+    returns = torch.cat([harness.play_lineups(make(64), [lineup]) for lineup in lineups], dim=1)
     (adv_random, _, adv_heuristic), (good_heuristic, good_random, _) = returns.tolist()
     assert good_heuristic > good_random / 3, returns
     assert adv_heuristic > adv_random + 40, returns

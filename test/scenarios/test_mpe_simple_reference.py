@@ -10,36 +10,21 @@ import numpy as np
 import pytest
 import torch
 
-import vmas
-import vmas_ros
+from test.scenarios import harness
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_reference as scenario
 
 NAME = "simple_reference"
 BATCH = 16
-FIELDS = ("pos", "vel", "rot", "ang_vel")
 
 
 def _make(num_envs: int = BATCH, seed: int = 0, **kwargs):
-    return vmas_ros.make_env(scenario.Scenario(), num_envs=num_envs, device="cpu", seed=seed, **kwargs)
-
-
-def _space(space):
-    """A plain description of a space, comparable between gym (upstream) and gymnasium (ours)."""
-    kind = type(space).__name__
-    if kind == "Tuple":
-        return kind, [_space(s) for s in space.spaces]
-    if kind == "Dict":
-        return kind, {k: _space(s) for k, s in space.spaces.items()}
-    if kind == "Box":
-        return kind, tuple(space.shape), space.low.tolist(), space.high.tolist()
-    if kind == "Discrete":
-        return kind, int(space.n)
-    return kind, np.asarray(space.nvec).tolist()
+    return harness.make(scenario.Scenario(), num_envs, seed, **kwargs)
 
 
 # ------------------------------------------------------------------ construction
 def test_default_world_matches_upstream_facts():
-    env, up = _make(), vmas.make_env(NAME, num_envs=2, seed=0)
+    env, up = _make(), harness.make_upstream(NAME, 2)
     assert [e.name for e in env.world.entities] == [e.name for e in up.world.entities]
     for ours, theirs in zip(env.world.entities, up.world.entities):
         assert ours.shape.radius == theirs.shape.radius and not ours.collide and not theirs.collide
@@ -54,50 +39,23 @@ def test_kwargs_and_validation():
 
 
 # ------------------------------------------------------------------------ spaces
-MODES = {
-    "continuous": dict(),
-    "discrete": dict(continuous_actions=False),
-    "multidiscrete": dict(continuous_actions=False, multidiscrete_actions=True),
-    "dict": dict(dict_spaces=True),
-}
-
-
-@pytest.mark.parametrize("mode", MODES.values(), ids=MODES.keys())
+@pytest.mark.parametrize("mode", harness.SPACE_MODES.values(), ids=harness.SPACE_MODES.keys())
 def test_spaces_equal_upstream_and_steps_work(mode):
     env = _make(num_envs=4, **mode)
-    up = vmas.make_env(NAME, num_envs=4, seed=0, **mode)
-    assert _space(env.observation_space) == _space(up.observation_space)
-    assert _space(env.action_space) == _space(up.action_space)
-    for _ in range(3):
-        actions = env.get_random_actions()
-        if mode.get("dict_spaces"):
-            actions = {a.name: act for a, act in zip(env.agents, actions)}
-        obs, rews, _, _ = env.step(actions)
-    if isinstance(obs, dict):
-        assert all(obs[name].shape == (4, *space.shape) for name, space in env.observation_space.spaces.items())
-    else:
-        assert all(o.shape == (4, *space.shape) for o, space in zip(obs, env.observation_space.spaces))
+    harness.check_spaces(env, harness.make_upstream(NAME, 4, **mode), 3, as_dict="dict_spaces" in mode)
 
 
 # ------------------------------------------------------------------------ resets
-def _state(env) -> torch.Tensor:
-    pos = torch.stack([e.state.pos for e in env.world.entities], dim=1).flatten(1)
-    return torch.cat([pos, env.scenario.goal.float()], dim=-1)
+def _goal(env):
+    """The per-env scenario state a reset redraws (besides positions): both agents' targets."""
+    return {"goal": env.scenario.goal}
 
 
 @pytest.mark.parametrize("index", [3, [0, 5, 6], "mask"], ids=["int", "list", "mask"])
 def test_reset_at_touches_exactly_those_envs(index):
     env = _make()
     env.step(env.get_random_actions())
-    if index == "mask":
-        index = torch.arange(BATCH) % 3 == 1
-    chosen = torch.zeros(BATCH, dtype=torch.bool)
-    chosen[index] = True
-    before = _state(env)
-    env.reset_at(index)
-    after = _state(env)
-    assert torch.equal(after[~chosen], before[~chosen])
-    assert (after[chosen, :-2] != before[chosen, :-2]).all()
+    chosen = harness.check_reset_at(env, index, mask_rows=slice(1, None, 3), scenario_state=_goal).chosen
     said = torch.stack([a.state.c for a in env.agents], dim=1)
     assert (said[chosen] == 0).all() and (said[~chosen] != 0).all()
     for i, agent in enumerate(env.agents):  # drawn in the colour of its own target, goal[:, 1 - i]
@@ -112,41 +70,31 @@ def test_goals_are_drawn_per_env():
 @pytest.mark.parametrize("policy", ["random", "heuristic"])
 def test_long_rollouts_stay_finite(policy):
     env = _make()
-    heuristic = scenario.HeuristicPolicy()
-    obs = env.reset()
-    for _ in range(200):
-        actions = env.get_random_actions() if policy == "random" else [heuristic.compute_action(o, 1.0) for o in obs]
-        obs, rews, _, _ = env.step(actions)
-        assert all(torch.isfinite(t).all() for t in obs + rews)
+    act = None if policy == "random" else scenario.HeuristicPolicy().compute_action  # None: random actions
+    harness.play_lineups(env, [[act] * env.n_agents], steps=200)
 
 
 # ------------------------------------------------------------------------ parity
-@pytest.mark.parametrize("continuous", [True, False], ids=["continuous", "discrete"])
-def test_parity_with_upstream_vmas(continuous):
-    up = vmas.make_env(NAME, num_envs=BATCH, device="cpu", seed=0, continuous_actions=continuous)
-    env = _make(continuous_actions=continuous)
-    for e_up, e_ours in zip(up.world.entities, env.world.entities):
-        for field in FIELDS:
-            getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
+def _copy_goal(up, ours) -> None:
     # upstream: agent.goal_b is one Landmark per agent for the whole batch; ours an index per env
     for i, agent in enumerate(up.world.agents):
-        env.scenario.goal[:, i] = up.world.landmarks.index(agent.goal_b)
-    gen = torch.Generator().manual_seed(13)
-    for step in range(50):
+        ours.scenario.goal[:, i] = up.world.landmarks.index(agent.goal_b)
+
+
+@pytest.mark.parametrize("continuous", [True, False], ids=["continuous", "discrete"])
+def test_parity_with_upstream_vmas(continuous):
+    up, env = harness.make_upstream(NAME, BATCH, continuous_actions=continuous), _make(continuous_actions=continuous)
+    harness.copy_start(up, env, _copy_goal)
+
+    def actions(gen):
         if continuous:
-            actions = [
+            return [
                 torch.cat([torch.rand(BATCH, 2, generator=gen) * 2 - 1, torch.rand(BATCH, 10, generator=gen)], -1)
                 for _ in up.agents
             ]
-        else:
-            actions = [torch.randint(0, 90, (BATCH, 1), generator=gen) for _ in up.agents]
-        obs_up, rew_up, _, _ = up.step([a.clone() for a in actions])
-        obs, rew, _, _ = env.step(actions)
-        for e_up, e_ours in zip(up.world.entities, env.world.entities):
-            for field in FIELDS:
-                torch.testing.assert_close(getattr(e_ours.state, field), getattr(e_up.state, field), atol=1e-4, rtol=0)
-        for mine, theirs in zip(obs + rew, obs_up + rew_up):
-            torch.testing.assert_close(mine, theirs, atol=1e-4, rtol=0, msg=lambda m: f"step {step}: {m}")
+        return [torch.randint(0, 90, (BATCH, 1), generator=gen) for _ in up.agents]
+
+    run_lockstep(up, env, seed=13, actions=actions, rtol=0)  # every state field within 1e-4, absolute only
 
 
 # --------------------------------------------------------------- MPE semantics
@@ -168,14 +116,11 @@ def test_rewards_and_observations_match_mpe(local_ratio):
     gen = torch.Generator().manual_seed(3)
     messages = [torch.rand(cases, 10, generator=gen) for _ in env.agents]
     obs, rew, _, _ = env.step([torch.cat([torch.zeros(cases, 2), m], dim=-1) for m in messages])
-    mpe = simple_reference_v3.parallel_env(local_ratio=local_ratio, continuous_actions=True, max_cycles=1000)
-    mpe.reset(seed=0)
-    world = mpe.unwrapped.world
-    assert [a.name for a in world.agents] == [a.name for a in env.agents]
+    mpe, world, _ = harness.make_mpe(
+        simple_reference_v3.parallel_env, env, local_ratio=local_ratio, continuous_actions=True, max_cycles=1000
+    )
     for k in range(cases):
-        for e_mpe, e_ours in zip(world.agents + world.landmarks, env.world.agents + env.world.landmarks):
-            e_mpe.state.p_pos = e_ours.state.pos[k].double().numpy().copy()
-            e_mpe.state.p_vel = np.zeros(2)
+        harness.copy_env_to_mpe(env, world, k, velocities=False)
         for i, agent in enumerate(world.agents):
             agent.goal_b = world.landmarks[int(env.scenario.goal[k, i])]
         still = np.zeros(5, np.float32)  # MPE's no-op, left, right, down, up
@@ -203,14 +148,7 @@ def test_heuristic_speaks_the_partners_landmark():
 
 def _mean_return(heuristic: bool, num_envs=64, steps=100) -> float:
     env = _make(num_envs=num_envs, seed=1)
-    policy = scenario.HeuristicPolicy()
-    obs = env.reset()
-    total = 0.0
-    for _ in range(steps):
-        actions = [policy.compute_action(o, 1.0) for o in obs] if heuristic else env.get_random_actions()
-        obs, rews, _, _ = env.step(actions)
-        total += float(rews[0].mean())
-    return total
+    return harness.team_returns(env, scenario.HeuristicPolicy(), lambda a: heuristic, steps)[0]  # shared reward
 
 
 def test_heuristic_beats_random():

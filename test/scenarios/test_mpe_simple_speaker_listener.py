@@ -1,65 +1,21 @@
 """simple_speaker_listener: construction, spaces, resets, parity with VMAS 1.5.2, semantics vs MPE, heuristic."""
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 import torch
 
-import vmas
-import vmas_ros
+from test.scenarios import harness
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_speaker_listener
 
 NAME = "simple_speaker_listener"
-FIELDS = ("pos", "vel", "rot", "ang_vel")
-ATOL = 1e-4
 
 
 def make(num_envs=8, **kwargs):
-    kwargs.setdefault("seed", 0)
-    return vmas_ros.make_env(simple_speaker_listener.Scenario(), num_envs=num_envs, device="cpu", **kwargs)
+    return harness.make(simple_speaker_listener.Scenario(), num_envs, **kwargs)
 
 
-def make_upstream(num_envs=8, **kwargs):
-    kwargs.setdefault("seed", 0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return vmas.make_env(NAME, num_envs=num_envs, device="cpu", **kwargs)
-
-
-def summary(space):
-    """A comparable description of a gym or gymnasium space (upstream uses gym, we use gymnasium)."""
-    kind = type(space).__name__
-    if kind == "Tuple":
-        return [summary(s) for s in space.spaces]
-    if kind == "Dict":
-        return {key: summary(value) for key, value in space.spaces.items()}
-    if kind == "Box":
-        return kind, space.shape, space.low.tolist(), space.high.tolist()
-    if kind == "Discrete":
-        return kind, int(space.n)
-    return kind, space.nvec.tolist()
-
-
-def random_actions(env, gen):
-    """Uniform actions inside each agent's action space (messages in [0, 1])."""
-    actions = []
-    for space in (env.get_agent_action_space(a) for a in env.agents):
-        kind = type(space).__name__
-        if kind == "Box":
-            low, high = torch.tensor(space.low), torch.tensor(space.high)
-            actions.append(low + (high - low) * torch.rand(env.num_envs, len(low), generator=gen))
-        elif kind == "Discrete":
-            actions.append(torch.randint(int(space.n), (env.num_envs, 1), generator=gen))
-        else:
-            nvec = torch.tensor(space.nvec)
-            actions.append((torch.rand(env.num_envs, len(nvec), generator=gen) * nvec).long())
-    return actions
-
-
-def heuristic_actions(env, policy, obs):
-    return [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents, strict=True)]
 
 
 # ------------------------------------------------------------------ construction
@@ -74,67 +30,35 @@ def test_construction_and_unknown_kwargs_warn():
         make(n_agents=4)  # upstream has no kwargs at all
 
 
-@pytest.mark.parametrize(
-    "mode",
-    [dict(), dict(continuous_actions=False), dict(continuous_actions=False, multidiscrete_actions=True), dict(dict_spaces=True)],
-    ids=["continuous", "discrete", "multidiscrete", "dict"],
-)
+@pytest.mark.parametrize("mode", harness.SPACE_MODES.values(), ids=harness.SPACE_MODES.keys())
 def test_spaces_match_upstream_and_random_rollout_is_finite(mode):
-    ours, up = make(**mode), make_upstream(**mode)
-    assert summary(ours.observation_space) == summary(up.observation_space)
-    assert summary(ours.action_space) == summary(up.action_space)
-    gen = torch.Generator().manual_seed(0)
-    for _ in range(200 if not mode else 30):  # the long run in the default mode, short ones in the others
-        actions = random_actions(ours, gen)
-        if mode.get("dict_spaces"):
-            actions = {a.name: act for a, act in zip(ours.agents, actions, strict=True)}
-        obs, rews, _, _ = ours.step(actions)
-        values = list(obs.values()) + list(rews.values()) if mode.get("dict_spaces") else obs + rews
-        assert all(torch.isfinite(v).all() for v in values)
+    ours, up = make(**mode), harness.make_upstream(NAME, 8, **mode)
+    steps = 200 if not mode else 30  # the long run in the default mode, short ones in the others
+    harness.check_spaces(ours, up, steps, gen=torch.Generator().manual_seed(0), as_dict=mode.get("dict_spaces", False))
 
 
 def test_heuristic_rollout_is_finite():
     env = make(num_envs=16)
     policy = simple_speaker_listener.HeuristicPolicy(continuous_action=True)
-    obs = env.reset()
-    for _ in range(200):
-        obs, rews, _, _ = env.step(heuristic_actions(env, policy, obs))
-        assert all(torch.isfinite(o).all() for o in obs) and all(torch.isfinite(r).all() for r in rews)
+    harness.play_lineups(env, [[policy.compute_action] * env.n_agents], steps=200)
 
 
 # ------------------------------------------------------------------------ resets
 
 
-def snapshot(env):
-    world, scenario = env.world, env.scenario
-    state = {f"{e.name}.{f}": getattr(e.state, f).clone() for e in world.entities for f in ("pos", "vel")}
-    state["speaker.c"] = scenario.speaker.state.c.clone()
-    state["goal"] = scenario.goal.clone()
-    return state
+def scenario_state(env):
+    """The per-env scenario state a reset clears (the speaker's message) or redraws (the goal)."""
+    return {"speaker.c": env.scenario.speaker.state.c, "goal": env.scenario.goal}
 
 
 @pytest.mark.parametrize("index", [3, [1, 5], "mask"], ids=["int", "list", "mask"])
 def test_reset_at_resets_exactly_the_selected_envs(index):
     env = make(num_envs=8)
-    gen = torch.Generator().manual_seed(1)
-    for _ in range(5):
-        env.step(random_actions(env, gen))
-    selected = torch.zeros(8, dtype=torch.bool)
-    if index == "mask":
-        index = torch.tensor([True, False, False, True, True, False, False, False])
-    selected[index] = True
-    before = snapshot(env)
-    obs = env.reset_at(index)
-    after = snapshot(env)
-    for key, value in before.items():
-        assert torch.equal(after[key][~selected], value[~selected]), key
-    for entity in env.world.entities:
-        assert (entity.state.vel[selected] == 0).all()
-        assert (entity.state.pos[selected] != before[f"{entity.name}.pos"][selected]).all()
-        assert (entity.state.pos[selected].abs() <= 1).all()
-    assert (env.scenario.speaker.state.c[selected] == 0).all()
+    harness.random_steps(env, 5, torch.Generator().manual_seed(1))
+    seen = harness.check_reset_at(env, index, mask_rows=[0, 3, 4], scenario_state=scenario_state, bound=1)
+    assert (env.scenario.speaker.state.c[seen.chosen] == 0).all()
     # the speaker is told the colour of its own env's goal
-    torch.testing.assert_close(obs[0], env.scenario.palette[env.scenario.goal])
+    torch.testing.assert_close(seen.obs[0], env.scenario.palette[env.scenario.goal])
 
 
 def test_every_env_draws_its_own_goal():
@@ -145,30 +69,18 @@ def test_every_env_draws_its_own_goal():
 # ------------------------------------------------------------------------ parity
 
 
-@pytest.mark.parametrize("mode", [dict(), dict(continuous_actions=False)], ids=["continuous", "discrete"])
-def test_parity_with_upstream_vmas(mode):
-    up, ours = make_upstream(16, **mode), make(16, **mode)
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities, strict=True):
-        assert e_up.name == e_ours.name
-        for field in FIELDS:
-            getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
+def copy_goal(up, ours):
     # Upstream draws one goal landmark for the whole batch (agent 0's goal_b);
     # ours keeps a goal index per env, so give every env upstream's goal.
     ours.scenario.goal[:] = up.world.landmarks.index(up.world.agents[0].goal_b)
-    gen = torch.Generator().manual_seed(2)
-    spoke = 0.0
-    for step in range(50):
-        actions = random_actions(ours, gen)
-        obs_up, rew_up, _, _ = up.step([a.clone() for a in actions])
-        obs_ours, rew_ours, _, _ = ours.step([a.clone() for a in actions])
-        for a, b in zip(obs_ours + rew_ours, obs_up + rew_up, strict=True):
-            torch.testing.assert_close(a, b, atol=ATOL, rtol=0, msg=lambda m, step=step: f"step {step}: {m}")
-        for e_up, e_ours in zip(up.world.entities, ours.world.entities, strict=True):
-            for field in FIELDS:
-                torch.testing.assert_close(getattr(e_ours.state, field), getattr(e_up.state, field), atol=ATOL, rtol=1e-4)
-        torch.testing.assert_close(ours.agents[0].state.c, up.agents[0].state.c, atol=ATOL, rtol=0)
-        spoke = max(spoke, float(ours.agents[0].state.c.abs().max()))
-    assert spoke > 0.5  # the message channel was exercised
+
+
+@pytest.mark.parametrize("mode", [dict(), dict(continuous_actions=False)], ids=["continuous", "discrete"])
+def test_parity_with_upstream_vmas(mode):
+    up, ours = harness.make_upstream(NAME, 16, **mode), make(16, **mode)
+    harness.copy_start(up, ours, copy_goal)
+    seen = run_lockstep(up, ours, seed=2, actions=lambda gen: harness.space_actions(ours, gen), speakers=[0])
+    assert seen.loudest_message > 0.5  # the message channel was exercised
 
 
 # --------------------------------------------------------------------- semantics
@@ -183,18 +95,13 @@ def test_rewards_and_observations_agree_with_mpe():
     """
     from mpe2 import simple_speaker_listener_v4
 
-    mpe = simple_speaker_listener_v4.parallel_env(continuous_actions=True)
-    mpe.reset(seed=0)
-    world, scenario = mpe.unwrapped.world, mpe.unwrapped.scenario
     ours = make(num_envs=8)
+    mpe, world, scenario = harness.make_mpe(simple_speaker_listener_v4.parallel_env, ours, continuous_actions=True)
     gen = torch.Generator().manual_seed(3)
     for _ in range(3):
-        obs, rews, _, _ = ours.step(random_actions(ours, gen))
+        obs, rews, _, _ = ours.step(harness.space_actions(ours, gen))
     for b in range(ours.num_envs):
-        for e_mpe, e_ours in zip(world.agents + world.landmarks, ours.world.agents + ours.world.landmarks, strict=True):
-            assert e_mpe.name == e_ours.name
-            e_mpe.state.p_pos = e_ours.state.pos[b].double().numpy()
-            e_mpe.state.p_vel = e_ours.state.vel[b].double().numpy()
+        harness.copy_env_to_mpe(ours, world, b, velocities=True)
         world.agents[0].state.c = ours.agents[0].state.c[b].double().numpy()
         world.agents[0].goal_b = world.landmarks[int(ours.scenario.goal[b])]
         for i, agent in enumerate(world.agents):
@@ -207,13 +114,8 @@ def test_rewards_and_observations_agree_with_mpe():
 
 
 def mean_return(env, policy, steps=100):
-    obs = env.reset()
-    total = torch.zeros(env.num_envs)
-    for _ in range(steps):
-        actions = env.get_random_actions() if policy is None else heuristic_actions(env, policy, obs)
-        obs, rews, _, _ = env.step(actions)
-        total += rews[0]
-    return float(total.mean())
+    """The shared return (agent 0's), mean over envs, every agent on ``policy`` (random if None)."""
+    return harness.team_returns(env, policy, lambda a: policy is not None, steps)[0]
 
 
 def test_heuristic_beats_random():

@@ -9,17 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-import vmas
 from mpe2 import simple_tag_v3
 
-import vmas_ros
-from test.scenarios.test_mpe_simple import (
-    ACTION_MODES,
-    assert_same_space,
-    copy_start,
-    play_lineups,
-    run_parity,
-)
+from test.scenarios import harness
+from test.scenarios.harness import ACTION_MODES
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_tag
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
@@ -36,7 +30,7 @@ CUSTOM_NO_RESPAWN = dict(CUSTOM, respawn_at_catch=False)
 
 
 def make(num_envs: int = BATCH, **kwargs):
-    return vmas_ros.make_env(simple_tag.Scenario(), num_envs=num_envs, device="cpu", seed=0, **kwargs)
+    return harness.make(simple_tag.Scenario(), num_envs, **kwargs)
 
 
 # ------------------------------------------------------------------- construction
@@ -75,15 +69,7 @@ def test_bad_and_unknown_kwargs():
 @pytest.mark.parametrize("mode", list(ACTION_MODES))
 def test_spaces_match_upstream_and_actions_work(mode, dict_spaces, kwargs):
     options = dict(ACTION_MODES[mode], dict_spaces=dict_spaces, **kwargs)
-    up = vmas.make_env(NAME, num_envs=4, device="cpu", seed=0, **options)
-    ours = make(4, **options)
-    assert_same_space(ours.observation_space, up.observation_space, "observation_space")
-    assert_same_space(ours.action_space, up.action_space, "action_space")
-    for _ in range(2):
-        obs, _, _, _ = ours.step(ours.get_random_actions())
-    values = list(obs.values()) if dict_spaces else obs
-    spaces = list(ours.observation_space.spaces.values()) if dict_spaces else ours.observation_space.spaces
-    assert all(v.shape == (4,) + s.shape and torch.isfinite(v).all() for v, s in zip(values, spaces))
+    harness.check_spaces(make(4, **options), harness.make_upstream(NAME, 4, **options), steps=2)
 
 
 # -------------------------------------------------------------------------- reset
@@ -92,19 +78,7 @@ def test_reset_at_resets_exactly_those_envs(index):
     env = make(8, bound=0.8)
     for _ in range(3):
         env.step([torch.ones(8, 2)] * env.n_agents)
-    chosen = torch.zeros(8, dtype=torch.bool)
-    if index == "mask":
-        index = chosen.clone()
-        index[[0, 5, 6]] = True
-    chosen[torch.as_tensor(index)] = True
-    before = {e.name: (e.state.pos.clone(), e.state.vel.clone()) for e in env.world.entities}
-    env.reset_at(index)
-    for e in env.world.entities:
-        pos, vel = before[e.name]
-        assert torch.equal(e.state.pos[~chosen], pos[~chosen]) and torch.equal(e.state.vel[~chosen], vel[~chosen])
-        assert (e.state.pos[chosen] != pos[chosen]).all() and (e.state.vel[chosen] == 0).all()
-        limit = 0.8 if e in env.agents else 0.7
-        assert (e.state.pos[chosen].abs() <= limit).all()
+    harness.check_reset_at(env, index, mask_rows=[0, 5, 6], bound=lambda e: 0.8 if e in env.agents else 0.7)
 
 
 @pytest.mark.parametrize("kwargs", [{}, CUSTOM], ids=["default", "custom"])
@@ -112,17 +86,16 @@ def test_long_rollouts_stay_finite(kwargs):
     """200 steps, half the envs on random actions, half on the heuristic; walls hold."""
     env = make(8, **kwargs)
     random, heuristic = RandomPolicy().compute_action, simple_tag.HeuristicPolicy(**kwargs).compute_action
-    play_lineups(env, [[random] * env.n_agents, [heuristic] * env.n_agents], steps=200)
+    harness.play_lineups(env, [[random] * env.n_agents, [heuristic] * env.n_agents], steps=200)
     assert all((a.state.pos.abs() <= env.world.x_semidim + 1e-3).all() for a in env.agents)
 
 
 # ------------------------------------------------------------------------- parity
 @pytest.mark.parametrize("kwargs", [{}, CUSTOM_NO_RESPAWN], ids=["default", "custom"])
 def test_matches_upstream_vmas(kwargs):
-    up = vmas.make_env(NAME, num_envs=BATCH, device="cpu", seed=0, **kwargs)
-    ours = make(**kwargs)
-    copy_start(up, ours)  # positions are the only state simple_tag randomises
-    largest = run_parity(up, ours)
+    up, ours = harness.make_upstream(NAME, BATCH, **kwargs), make(**kwargs)
+    harness.copy_start(up, ours)  # positions are the only state simple_tag randomises
+    largest = run_lockstep(up, ours, seed=0).largest_reward
     assert largest > 0  # some catch (or shaping) happened, so rewards were compared for real
 
 
@@ -198,12 +171,10 @@ def test_rewards_and_observations_match_mpe(counts):
         a.set_vel(vel[:, i], batch_index=None)
     obs_ours = shared.get_from_scenario(True, False, False, False)[0]
 
-    mpe = simple_tag_v3.parallel_env(
-        num_good=n_good, num_adversaries=n_adv, num_obstacles=n_lm, continuous_actions=True, max_cycles=10 * n
+    mpe, world, scenario = harness.make_mpe(
+        simple_tag_v3.parallel_env, shared,
+        num_good=n_good, num_adversaries=n_adv, num_obstacles=n_lm, continuous_actions=True, max_cycles=10 * n,
     )
-    mpe.reset(seed=0)
-    world, scenario = mpe.unwrapped.world, mpe.unwrapped.scenario
-    assert [a.name for a in world.agents] == [a.name for a in shared.agents]
     rew_mpe, obs_mpe = torch.zeros(n, n_agents, dtype=torch.float64), []
     for k in range(n):
         for j, l in enumerate(world.landmarks):
@@ -265,7 +236,7 @@ def test_heuristic_beats_random():
     # one env per line-up: past ~100 envs this world's step is much slower with torch's
     # intra-op threads on a busy 2-core machine (engine performance, reported separately)
     lineups = [[hunt] * 3 + [rand], [rand] * 4, [hunt] * 4]
-    returns = torch.cat([play_lineups(make(64), [lineup]) for lineup in lineups], dim=1)
+    returns = torch.cat([harness.play_lineups(make(64), [lineup]) for lineup in lineups], dim=1)
     chase_vs_random, random_vs_random, chase_vs_flee = returns.T
     assert chase_vs_random[0] > random_vs_random[0] + 500, returns
     assert chase_vs_flee[-1] > chase_vs_random[-1] / 3, returns

@@ -1,66 +1,22 @@
 """simple_world_comm: construction, spaces, resets, parity with VMAS 1.5.2, semantics vs MPE, heuristic."""
 from __future__ import annotations
 
-import warnings
-
 import pytest
 import torch
 
-import vmas
-import vmas_ros
+from test.scenarios import harness
+from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_world_comm
 
 NAME = "simple_world_comm"
-FIELDS = ("pos", "vel", "rot", "ang_vel")
-ATOL = 1e-4
 CUSTOM = dict(num_good_agents=3, num_adversaries=2, num_landmarks=2, num_food=3, num_forests=1)
 CUSTOM_2 = dict(num_good_agents=1, num_adversaries=3, num_landmarks=0, num_food=1, num_forests=3)
 
 
 def make(num_envs=8, **kwargs):
-    kwargs.setdefault("seed", 0)
-    return vmas_ros.make_env(simple_world_comm.Scenario(), num_envs=num_envs, device="cpu", **kwargs)
+    return harness.make(simple_world_comm.Scenario(), num_envs, **kwargs)
 
 
-def make_upstream(num_envs=8, **kwargs):
-    kwargs.setdefault("seed", 0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return vmas.make_env(NAME, num_envs=num_envs, device="cpu", **kwargs)
-
-
-def summary(space):
-    """A comparable description of a gym or gymnasium space (upstream uses gym, we use gymnasium)."""
-    kind = type(space).__name__
-    if kind == "Tuple":
-        return [summary(s) for s in space.spaces]
-    if kind == "Dict":
-        return {key: summary(value) for key, value in space.spaces.items()}
-    if kind == "Box":
-        return kind, space.shape, space.low.tolist(), space.high.tolist()
-    if kind == "Discrete":
-        return kind, int(space.n)
-    return kind, space.nvec.tolist()
-
-
-def random_actions(env, gen):
-    """Uniform actions inside each agent's action space (messages in [0, 1])."""
-    actions = []
-    for space in (env.get_agent_action_space(a) for a in env.agents):
-        kind = type(space).__name__
-        if kind == "Box":
-            low, high = torch.tensor(space.low), torch.tensor(space.high)
-            actions.append(low + (high - low) * torch.rand(env.num_envs, len(low), generator=gen))
-        elif kind == "Discrete":
-            actions.append(torch.randint(int(space.n), (env.num_envs, 1), generator=gen))
-        else:
-            nvec = torch.tensor(space.nvec)
-            actions.append((torch.rand(env.num_envs, len(nvec), generator=gen) * nvec).long())
-    return actions
-
-
-def heuristic_actions(env, policy, obs):
-    return [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents, strict=True)]
 
 
 # ------------------------------------------------------------------ construction
@@ -89,31 +45,20 @@ def test_layouts_upstream_cannot_run_are_refused(bad):
 
 @pytest.mark.parametrize(
     "mode",
-    [dict(), dict(continuous_actions=False), dict(continuous_actions=False, multidiscrete_actions=True), dict(dict_spaces=True), dict(CUSTOM), dict(CUSTOM_2)],
-    ids=["continuous", "discrete", "multidiscrete", "dict", "custom", "custom2"],
+    [*harness.SPACE_MODES.values(), dict(CUSTOM), dict(CUSTOM_2)],
+    ids=[*harness.SPACE_MODES.keys(), "custom", "custom2"],
 )
 def test_spaces_match_upstream_and_random_rollout_is_finite(mode):
-    ours, up = make(**mode), make_upstream(**mode)
-    assert summary(ours.observation_space) == summary(up.observation_space)
-    assert summary(ours.action_space) == summary(up.action_space)
-    gen = torch.Generator().manual_seed(0)
-    for _ in range(200 if not mode else 30):  # the long run in the default mode, short ones in the others
-        actions = random_actions(ours, gen)
-        if mode.get("dict_spaces"):
-            actions = {a.name: act for a, act in zip(ours.agents, actions, strict=True)}
-        obs, rews, _, _ = ours.step(actions)
-        values = list(obs.values()) + list(rews.values()) if mode.get("dict_spaces") else obs + rews
-        assert all(torch.isfinite(v).all() for v in values)
+    ours, up = make(**mode), harness.make_upstream(NAME, 8, **mode)
+    steps = 200 if not mode else 30  # the long run in the default mode, short ones in the others
+    harness.check_spaces(ours, up, steps, gen=torch.Generator().manual_seed(0), as_dict=mode.get("dict_spaces", False))
 
 
 @pytest.mark.parametrize("kwargs", [dict(), CUSTOM, CUSTOM_2], ids=["default", "custom", "custom2"])
 def test_heuristic_rollout_is_finite(kwargs):
     env = make(num_envs=16, **kwargs)
     policy = simple_world_comm.HeuristicPolicy(continuous_action=True, **kwargs)
-    obs = env.reset()
-    for _ in range(200 if not kwargs else 50):
-        obs, rews, _, _ = env.step(heuristic_actions(env, policy, obs))
-        assert all(torch.isfinite(o).all() for o in obs) and all(torch.isfinite(r).all() for r in rews)
+    harness.play_lineups(env, [[policy.compute_action] * env.n_agents], steps=200 if not kwargs else 50)
 
 
 def test_heuristic_refuses_a_layout_it_was_not_built_for():
@@ -127,33 +72,18 @@ def test_heuristic_refuses_a_layout_it_was_not_built_for():
 # ------------------------------------------------------------------------ resets
 
 
-def snapshot(env):
-    state = {f"{e.name}.{f}": getattr(e.state, f).clone() for e in env.world.entities for f in ("pos", "vel")}
-    state["leader.c"] = env.agents[0].state.c.clone()
-    return state
+def scenario_state(env):
+    """The per-env scenario state a reset clears: the leader's message."""
+    return {"leader.c": env.agents[0].state.c}
 
 
 @pytest.mark.parametrize("index", [3, [1, 5], "mask"], ids=["int", "list", "mask"])
 def test_reset_at_resets_exactly_the_selected_envs(index):
     env = make(num_envs=8)
-    gen = torch.Generator().manual_seed(1)
-    for _ in range(5):
-        env.step(random_actions(env, gen))
-    selected = torch.zeros(8, dtype=torch.bool)
-    if index == "mask":
-        index = torch.tensor([True, False, False, True, True, False, False, False])
-    selected[index] = True
-    before = snapshot(env)
-    env.reset_at(index)
-    after = snapshot(env)
-    for key, value in before.items():
-        assert torch.equal(after[key][~selected], value[~selected]), key
-    for entity in env.world.entities:
-        bound = 1.0 if entity in env.world.agents else 0.9
-        assert (entity.state.vel[selected] == 0).all()
-        assert (entity.state.pos[selected] != before[f"{entity.name}.pos"][selected]).all()
-        assert (entity.state.pos[selected].abs() <= bound).all()
-    assert (env.agents[0].state.c[selected] == 0).all()
+    harness.random_steps(env, 5, torch.Generator().manual_seed(1))
+    bound = lambda entity: 1.0 if entity in env.world.agents else 0.9  # noqa: E731
+    seen = harness.check_reset_at(env, index, mask_rows=[0, 3, 4], scenario_state=scenario_state, bound=bound)
+    assert (env.agents[0].state.c[seen.chosen] == 0).all()
 
 
 # ------------------------------------------------------------------------ parity
@@ -164,25 +94,10 @@ def test_reset_at_resets_exactly_the_selected_envs(index):
 )
 def test_parity_with_upstream_vmas(kwargs):
     """Upstream randomises only positions (and colours, which nothing reads) at reset."""
-    up, ours = make_upstream(16, **kwargs), make(16, **kwargs)
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities, strict=True):
-        assert e_up.name == e_ours.name
-        for field in FIELDS:
-            getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
-    gen = torch.Generator().manual_seed(2)
-    caught = 0.0
-    for step in range(50):
-        actions = random_actions(ours, gen)
-        obs_up, rew_up, _, _ = up.step([a.clone() for a in actions])
-        obs_ours, rew_ours, _, _ = ours.step([a.clone() for a in actions])
-        for a, b in zip(obs_ours + rew_ours, obs_up + rew_up, strict=True):
-            torch.testing.assert_close(a, b, atol=ATOL, rtol=0, msg=lambda m, step=step: f"step {step}: {m}")
-        for e_up, e_ours in zip(up.world.entities, ours.world.entities, strict=True):
-            for field in FIELDS:
-                torch.testing.assert_close(getattr(e_ours.state, field), getattr(e_up.state, field), atol=ATOL, rtol=1e-4)
-        torch.testing.assert_close(ours.agents[0].state.c, up.agents[0].state.c, atol=ATOL, rtol=0)
-        caught += float(rew_ours[0].sum())
-    assert caught > 0  # some predator touched some prey: the catch terms were compared too
+    up, ours = harness.make_upstream(NAME, 16, **kwargs), make(16, **kwargs)
+    harness.copy_start(up, ours)
+    seen = run_lockstep(up, ours, seed=2, actions=lambda gen: harness.space_actions(ours, gen), speakers=[0])
+    assert seen.reward_sums[0] > 0  # some predator touched some prey: the catch terms were compared too
 
 
 # --------------------------------------------------------------------- semantics
@@ -218,10 +133,11 @@ def test_rewards_and_leader_view_agree_with_mpe():
     """
     from mpe2 import simple_world_comm_v3
 
-    mpe = simple_world_comm_v3.parallel_env(continuous_actions=True)
-    mpe.reset(seed=0)
-    world, scenario = mpe.unwrapped.world, mpe.unwrapped.scenario
     ours = make(num_envs=12)
+    # VMAS names the predators lead_adversary_0, adversary_1, ...; MPE leadadversary_0, adversary_0, ...
+    mpe, world, scenario = harness.make_mpe(
+        simple_world_comm_v3.parallel_env, ours, same_names=False, continuous_actions=True
+    )
     staged_state(ours, torch.Generator().manual_seed(3))
     rewards = [ours.scenario.reward(a) for a in ours.agents]
     leader_obs = ours.scenario.observation(ours.agents[0])
@@ -229,9 +145,7 @@ def test_rewards_and_leader_view_agree_with_mpe():
     n_others, n_forests = len(ours.agents) - 1, len(ours.scenario.forests)
     assert sum(float(r.sum()) for r in rewards[:4]) >= 4 * 5 * 8  # catches were staged in 8 envs
     for b in range(ours.num_envs):
-        for e_mpe, e_ours in zip(world.agents + world.landmarks, ours.world.agents + ours.world.landmarks, strict=True):
-            e_mpe.state.p_pos = e_ours.state.pos[b].double().numpy()
-            e_mpe.state.p_vel = e_ours.state.vel[b].double().numpy()
+        harness.copy_env_to_mpe(ours, world, b, velocities=True, same_names=False)
         world.agents[0].state.c = ours.agents[0].state.c[b].double().numpy()
         for agent, mpe_agent, reward in zip(ours.agents, world.agents, rewards, strict=True):
             expected = scenario.reward(mpe_agent, world)
@@ -258,19 +172,14 @@ def test_rewards_and_leader_view_agree_with_mpe():
 
 
 def team_returns(env, policy, heuristic_team, steps=100):
-    """Mean return of [predators, prey] when ``heuristic_team`` uses the heuristic and the other acts randomly."""
-    obs = env.reset()
-    predators = torch.zeros(env.num_envs)
-    prey = torch.zeros(env.num_envs)
-    for _ in range(steps):
-        actions = env.get_random_actions()
-        for i, (o, agent) in enumerate(zip(obs, env.agents, strict=True)):
-            if policy is not None and agent.adversary == (heuristic_team == "predators"):
-                actions[i] = policy.compute_action(o, u_range=agent.u_range)
-        obs, rews, _, _ = env.step(actions)
-        predators += rews[0]
-        prey += torch.stack([r for r, a in zip(rews, env.agents, strict=True) if not a.adversary]).mean(dim=0)
-    return float(predators.mean()), float(prey.mean())
+    """Mean return of [predators, prey] when ``heuristic_team`` uses the heuristic and the other acts randomly.
+
+    The predators' return is the lead adversary's (agent 0), the prey's the mean over prey.
+    """
+    on_heuristic = lambda agent: policy is not None and agent.adversary == (heuristic_team == "predators")  # noqa: E731
+    returns = harness.team_returns(env, policy, on_heuristic, steps)
+    prey = [r for r, agent in zip(returns, env.agents, strict=True) if not agent.adversary]
+    return returns[0], sum(prey) / len(prey)
 
 
 def test_heuristic_beats_random():

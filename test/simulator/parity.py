@@ -1,15 +1,26 @@
 """Shared pieces of the parity tests against upstream VMAS (the oracle).
 
-Every parity test does the same three things: write one random initial state
-into both worlds, step both with identical actions, and require the same
-states. These helpers are the first and the last step.
+Every parity test does the same three things: write one initial state into
+both worlds (``copy_random_state``, or ``copy_state`` to start ours where
+upstream's own reset left it), step both with identical actions, and require
+the same states, observations and rewards (``run_lockstep``, which checks
+with ``assert_same_state``). The engine tests (``test/simulator``) and the
+scenario tests (``test/scenarios``) both use these.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional, Sequence
 
 import torch
 
 FIELDS = ("pos", "vel", "rot", "ang_vel")
 ATOL = 1e-4
+#: relative tolerance of the fields other than ``pos`` (velocities and angles
+#: may carry float32 rounding relative to their size); ``pos`` always has rtol 0
+RTOL = 1e-4
+#: steps of a parity run
+STEPS = 50
 
 
 def copy_random_state(up, ours, seed: int, spread: float, agents_only: bool = False) -> None:
@@ -24,21 +35,104 @@ def copy_random_state(up, ours, seed: int, spread: float, agents_only: bool = Fa
             "rot": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 3.0,
             "ang_vel": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 0.5,
         }
-        for field, value in values.items():
-            getattr(e_up, f"set_{field}")(value.to(up.device), batch_index=None)
-            getattr(e_ours, f"set_{field}")(value.to(ours.device), batch_index=None)
+        for field_name, value in values.items():
+            getattr(e_up, f"set_{field_name}")(value.to(up.device), batch_index=None)
+            getattr(e_ours, f"set_{field_name}")(value.to(ours.device), batch_index=None)
 
 
-def assert_same_state(up, ours, step: int) -> None:
-    """Positions within 1e-4; velocities and angles 1e-4 absolute plus 1e-4 relative."""
+def copy_state(up, ours) -> None:
+    """Give every entity of ours upstream's ``FIELDS`` (pos, vel, rot, ang_vel) in every env.
+
+    The worlds must list the same entities under the same names, in the same order.
+    """
     assert [e.name for e in up.world.entities] == [e.name for e in ours.world.entities]
     for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        for field in FIELDS:
-            expected, actual = getattr(e_up.state, field), getattr(e_ours.state, field)
+        for field_name in FIELDS:
+            getattr(e_ours, f"set_{field_name}")(getattr(e_up.state, field_name).clone(), batch_index=None)
+
+
+def uniform_actions(env, gen: torch.Generator) -> List[torch.Tensor]:
+    """One action per agent of ``env``, uniform in [-u_range, u_range] per component: [B, action size]."""
+    return [
+        (torch.rand(env.num_envs, env.get_agent_action_size(a), generator=gen) * 2 - 1) * a.action.u_range_tensor
+        for a in env.agents
+    ]
+
+
+def assert_same_state(up, ours, step: int, rtol: float = RTOL) -> None:
+    """Same entities (by name), each state field finite, on upstream's device and close to upstream's.
+
+    Positions within ``ATOL`` (absolute only); velocities and angles within
+    ``ATOL`` absolute plus ``rtol`` relative (pass ``rtol=0`` for absolute only).
+    """
+    assert [e.name for e in up.world.entities] == [e.name for e in ours.world.entities]
+    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
+        for field_name in FIELDS:
+            expected, actual = getattr(e_up.state, field_name), getattr(e_ours.state, field_name)
             assert actual.device == expected.device
-            assert torch.isfinite(actual).all(), f"{e_ours.name}.{field} not finite at step {step}"
-            # derivatives may carry float32 rounding relative to their size
+            assert torch.isfinite(actual).all(), f"{e_ours.name}.{field_name} not finite at step {step}"
             torch.testing.assert_close(
-                actual, expected, atol=ATOL, rtol=0 if field == "pos" else 1e-4,
-                msg=lambda m: f"step {step}, {e_ours.name}.{field}: {m}",
+                actual, expected, atol=ATOL, rtol=0 if field_name == "pos" else rtol,
+                msg=lambda m: f"step {step}, {e_ours.name}.{field_name}: {m}",
             )
+
+
+@dataclass
+class Lockstep:
+    """What ours did during ``run_lockstep``: evidence that the comparison was not vacuous."""
+
+    #: largest |reward| of any agent in any env at any step
+    largest_reward: float = 0.0
+    #: largest speed of any entity in any env at any step
+    fastest: float = 0.0
+    #: per agent, its rewards summed over envs and steps
+    reward_sums: List[float] = field(default_factory=list)
+    #: largest |message| (``state.c``) any of the ``speakers`` sent
+    loudest_message: float = 0.0
+
+
+def run_lockstep(
+    up,
+    ours,
+    seed: int,
+    actions: Optional[Callable[[torch.Generator], List[torch.Tensor]]] = None,
+    steps: int = STEPS,
+    rtol: float = RTOL,
+    speakers: Sequence[int] = (),
+    message_atol: float = ATOL,
+) -> Lockstep:
+    """Step both envs ``steps`` times with identical actions; they must agree at every step.
+
+    ``actions(gen)`` draws one step's actions from a generator seeded with
+    ``seed`` (default: ``uniform_actions`` of upstream's agents). Before the
+    first step and after each one: ``assert_same_state`` (with ``rtol``), and
+    every observation and reward within ``ATOL`` (absolute, same dtype). For
+    the agents at the indices ``speakers`` the messages (``state.c``) must
+    also agree within ``message_atol`` (absolute).
+
+    Returns what ours did (``Lockstep``), so callers can check the run
+    exercised what it was meant to compare.
+    """
+    gen = torch.Generator().manual_seed(seed)
+    if actions is None:
+        actions = lambda g: uniform_actions(up, g)  # noqa: E731
+    seen = Lockstep(reward_sums=[0.0] * len(ours.agents))
+    assert_same_state(up, ours, 0, rtol)
+    for step in range(1, steps + 1):
+        chosen = actions(gen)
+        obs_up, rew_up, _, _ = up.step([a.clone() for a in chosen])
+        obs_ours, rew_ours, _, _ = ours.step([a.clone() for a in chosen])
+        assert_same_state(up, ours, step, rtol)
+        for mine, theirs in zip(obs_ours + rew_ours, obs_up + rew_up, strict=True):
+            torch.testing.assert_close(mine, theirs, atol=ATOL, rtol=0, msg=lambda m: f"step {step}: {m}")
+        for i in speakers:
+            message_up, message = up.agents[i].state.c, ours.agents[i].state.c
+            torch.testing.assert_close(
+                message, message_up, atol=message_atol, rtol=0,
+                msg=lambda m: f"step {step}, {ours.agents[i].name}.c: {m}",
+            )
+            seen.loudest_message = max(seen.loudest_message, float(message.abs().max()))
+        seen.largest_reward = max([seen.largest_reward] + [float(r.abs().max()) for r in rew_ours])
+        seen.fastest = max(seen.fastest, max(float(e.state.vel.norm(dim=-1).max()) for e in ours.world.entities))
+        seen.reward_sums = [total + float(r.sum()) for total, r in zip(seen.reward_sums, rew_ours)]
+    return seen

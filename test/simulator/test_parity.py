@@ -10,7 +10,6 @@ from __future__ import annotations
 import itertools
 
 import pytest
-import torch
 
 import vmas
 import vmas_ros
@@ -18,10 +17,8 @@ from test.simulator import parity, parity_scenarios
 
 UP = parity_scenarios.load("vmas")
 OURS = parity_scenarios.load("vmas_ros")
-STEPS = 50
-ATOL = 1e-4
+STEPS = parity.STEPS
 BATCH = 16
-FIELDS = parity.FIELDS
 
 
 def _make_pair(name: str, **kwargs):
@@ -34,28 +31,9 @@ def _randomize(up, ours, seed: int, spread: float = 0.35) -> None:
     parity.copy_random_state(up, ours, seed, spread)
 
 
-_assert_same_state = parity.assert_same_state
-
-
 def _run(up, ours, seed: int, steps: int = STEPS) -> float:
     """Step both with identical random actions; return the largest speed seen (to prove motion)."""
-    gen = torch.Generator().manual_seed(seed + 1)
-    _assert_same_state(up, ours, 0)
-    fastest = 0.0
-    for step in range(1, steps + 1):
-        actions = [
-            (torch.rand(BATCH, up.get_agent_action_size(a), generator=gen) * 2 - 1) * a.action.u_range_tensor
-            for a in up.agents
-        ]
-        obs_up, rew_up, _, _ = up.step([a.clone() for a in actions])
-        obs_ours, rew_ours, _, _ = ours.step([a.clone() for a in actions])
-        _assert_same_state(up, ours, step)
-        for o_up, o_ours in zip(obs_up, obs_ours):
-            torch.testing.assert_close(o_ours, o_up, atol=ATOL, rtol=0)
-        for r_up, r_ours in zip(rew_up, rew_ours):
-            torch.testing.assert_close(r_ours, r_up, atol=ATOL, rtol=0)
-        fastest = max(fastest, max(float(e.state.vel.norm(dim=-1).max()) for e in ours.world.entities))
-    return fastest
+    return parity.run_lockstep(up, ours, seed + 1, steps=steps).fastest
 
 
 KINDS = ["sphere", "box", "line"]
@@ -125,7 +103,5 @@ def test_shipped_scenarios_match_upstream(name, kwargs):
     """Our scenarios are our code; with the same start they must give VMAS's obs and rewards."""
     up = vmas.make_env(name, num_envs=BATCH, device="cpu", seed=0, **kwargs)
     ours = vmas_ros.make_env(name, num_envs=BATCH, device="cpu", seed=0, **kwargs)
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        for field in FIELDS:
-            getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
+    parity.copy_state(up, ours)
     _run(up, ours, seed=41)
