@@ -1,0 +1,225 @@
+"""Batched state of entities and agents' actions.
+
+``EntityState`` holds one tensor per quantity for every env of the batch
+(``pos`` is [batch, 2]); ``Action`` holds an agent's physical action ``u`` and
+message ``c`` for the current step. Setters validate shape and device, so a
+wrong tensor fails where it is written, not deep inside a step.
+"""
+from __future__ import annotations
+
+from typing import List, Optional
+
+import torch
+from torch import Tensor
+
+from vmas_ros.simulator.utils import TorchUtils
+
+__all__ = ["EntityState", "AgentState", "Action"]
+
+
+class _Batched:
+    """Something that lives in a world: knows the batch size and device."""
+
+    def __init__(self) -> None:
+        self._batch_dim: Optional[int] = None
+        self._device: Optional[torch.device] = None
+
+    @property
+    def batch_dim(self) -> Optional[int]:
+        return self._batch_dim
+
+    @batch_dim.setter
+    def batch_dim(self, value: int) -> None:
+        self._batch_dim = value
+
+    @property
+    def device(self) -> Optional[torch.device]:
+        return self._device
+
+    @device.setter
+    def device(self, value) -> None:
+        self._device = torch.device(value) if value is not None else None
+
+    def _check_tensor(self, owner: str, name: str, value: Tensor) -> Tensor:
+        if self._batch_dim is None:
+            raise RuntimeError(f"add {owner} to a world before setting its {name}")
+        if not isinstance(value, Tensor):
+            raise TypeError(f"{owner}.{name} must be a torch.Tensor, got {type(value).__name__}")
+        if value.dim() == 0 or value.shape[0] != self._batch_dim:
+            raise ValueError(
+                f"{owner}.{name} must have batch dimension {self._batch_dim} first, "
+                f"got shape {tuple(value.shape)}"
+            )
+        return value.to(self._device)
+
+
+def _state_tensor(name: str, width: int, doc: str):
+    """A validated [batch, width] tensor attribute of a state object."""
+    attr = "_" + name
+
+    def fget(self):
+        return getattr(self, attr)
+
+    def fset(self, value: Tensor) -> None:
+        value = self._check_tensor(self._owner_name, name, value)
+        if value.dim() != 2 or value.shape[1] != width:
+            raise ValueError(
+                f"{self._owner_name}.{name} must have shape [{self._batch_dim}, {width}], "
+                f"got {tuple(value.shape)}"
+            )
+        setattr(self, attr, value)
+
+    return property(fget, fset, doc=doc)
+
+
+class EntityState(_Batched):
+    """Batched kinematic state of one entity across all envs."""
+
+    pos = _state_tensor("pos", 2, "position [batch, 2] in the world frame")
+    vel = _state_tensor("vel", 2, "velocity [batch, 2] in the world frame")
+    rot = _state_tensor("rot", 1, "heading [batch, 1], radians, counter-clockwise")
+    ang_vel = _state_tensor("ang_vel", 1, "angular velocity [batch, 1], rad/s")
+
+    _fields = ("pos", "vel", "rot", "ang_vel")
+
+    def __init__(self, owner_name: str = "entity") -> None:
+        super().__init__()
+        self._owner_name = owner_name
+        self._pos = self._vel = self._rot = self._ang_vel = None
+
+    def _spawn(self, dim_c: int, dim_p: int) -> None:
+        zeros = lambda width: torch.zeros(self._batch_dim, width, device=self._device)  # noqa: E731
+        self._pos, self._vel = zeros(dim_p), zeros(dim_p)
+        self._rot, self._ang_vel = zeros(1), zeros(1)
+
+    def _reset(self, env_index) -> None:
+        for name in self._fields:
+            value = getattr(self, "_" + name)
+            if value is None:
+                continue
+            if env_index is None:
+                setattr(self, "_" + name, torch.zeros_like(value))
+            else:
+                setattr(self, "_" + name, TorchUtils.where_from_index(env_index, 0.0, value))
+
+    def zero_grad(self) -> None:
+        for name in self._fields:
+            value = getattr(self, "_" + name)
+            if value is not None:
+                setattr(self, "_" + name, value.detach())
+
+
+class AgentState(EntityState):
+    """Entity state plus the agent's message ``c`` and its action ``force``/``torque``."""
+
+    _fields = EntityState._fields + ("c", "force", "torque")
+
+    def __init__(self, owner_name: str = "agent") -> None:
+        super().__init__(owner_name)
+        self._c = self._force = self._torque = None
+
+    # c's width depends on the world, so it has its own setter
+    @property
+    def c(self) -> Optional[Tensor]:
+        return self._c
+
+    @c.setter
+    def c(self, value: Tensor) -> None:
+        self._c = self._check_tensor(self._owner_name, "c", value)
+
+    force = _state_tensor("force", 2, "action force [batch, 2] for the next step")
+    torque = _state_tensor("torque", 1, "action torque [batch, 1] for the next step")
+
+    def _spawn(self, dim_c: int, dim_p: int) -> None:
+        super()._spawn(dim_c, dim_p)
+        if dim_c > 0:
+            self._c = torch.zeros(self._batch_dim, dim_c, device=self._device)
+        self._force = torch.zeros(self._batch_dim, dim_p, device=self._device)
+        self._torque = torch.zeros(self._batch_dim, 1, device=self._device)
+
+
+def _per_component(value, size: int, name: str) -> List[float]:
+    if isinstance(value, (list, tuple)):
+        if len(value) != size:
+            raise ValueError(f"{name} has {len(value)} entries but the action has {size} components")
+        return [float(v) for v in value]
+    return [float(value)] * size
+
+
+class Action(_Batched):
+    """An agent's physical action ``u`` and message ``c`` for the current step."""
+
+    def __init__(self, u_range, u_multiplier, u_noise, action_size: int) -> None:
+        super().__init__()
+        self.action_size = action_size
+        self._u_range = u_range
+        self._u_multiplier = u_multiplier
+        self._u_noise = u_noise
+        for name, value in (("u_range", u_range), ("u_multiplier", u_multiplier), ("u_noise", u_noise)):
+            _per_component(value, action_size, name)  # validates list lengths early
+        self._u: Optional[Tensor] = None
+        self._c: Optional[Tensor] = None
+        self._tensor_cache: dict = {}
+
+    @property
+    def u(self) -> Optional[Tensor]:
+        return self._u
+
+    @u.setter
+    def u(self, value: Tensor) -> None:
+        self._u = self._check_tensor("action", "u", value)
+
+    @property
+    def c(self) -> Optional[Tensor]:
+        return self._c
+
+    @c.setter
+    def c(self, value: Tensor) -> None:
+        self._c = self._check_tensor("action", "c", value)
+
+    @property
+    def u_range(self):
+        return self._u_range
+
+    @property
+    def u_multiplier(self):
+        return self._u_multiplier
+
+    @property
+    def u_noise(self):
+        return self._u_noise
+
+    def _as_tensor(self, name: str) -> Tensor:
+        key = (name, self._device)
+        if key not in self._tensor_cache:
+            values = _per_component(getattr(self, name), self.action_size, name)
+            self._tensor_cache[key] = torch.tensor(values, device=self._device, dtype=torch.float32)
+        return self._tensor_cache[key]
+
+    @property
+    def u_range_tensor(self) -> Tensor:
+        return self._as_tensor("u_range")
+
+    @property
+    def u_multiplier_tensor(self) -> Tensor:
+        return self._as_tensor("u_multiplier")
+
+    @property
+    def u_noise_tensor(self) -> Tensor:
+        return self._as_tensor("u_noise")
+
+    def _reset(self, env_index) -> None:
+        for name in ("_u", "_c"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if env_index is None:
+                setattr(self, name, torch.zeros_like(value))
+            else:
+                setattr(self, name, TorchUtils.where_from_index(env_index, 0.0, value))
+
+    def zero_grad(self) -> None:
+        for name in ("_u", "_c"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, value.detach())
