@@ -20,9 +20,24 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _wait_listening(port: int, timeout: float = 20.0) -> None:
+    """Until something accepts TCP on the port: topic discovery can be satisfied by a node
+    from an earlier test that is still leaving the graph, before this one serves Foxglove."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=1.0):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+
+
 def test_foxglove_client_sees_the_scene_and_drives_an_agent(ros, sim_node):
     port = _free_port()
     sim = sim_node(scenario_kwargs='{"n_agents": 1}', foxglove_port=port, cmd_vel_timeout=0.5, seed=3)
+    _wait_listening(port)
     odom = ros.collect(Odometry, "/agent_0/odom")
 
     async def session():
