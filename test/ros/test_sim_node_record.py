@@ -1,7 +1,6 @@
 """sim_node records a rosbag2-compatible MCAP bag; independent readers read it back after SIGTERM."""
 from __future__ import annotations
 
-import math
 import signal
 import time
 import warnings
