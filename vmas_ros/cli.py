@@ -6,6 +6,7 @@ Subcommands:
             (reward against random actions, speed) and optionally saves a picture
     play    drive a scenario's agents with the keyboard (pygame window)
     bench   benchmarks against upstream VMAS and MPE (speed ratios, CSV/JSON/PNG)
+    evaluate  each scenario's heuristic against random play (mean episode returns, CSV/Markdown)
     render  roll out a scenario and save it as a GIF, MP4 or PNG
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
@@ -197,6 +198,11 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="benchmarks (mpe: the VMAS paper's Figure 2, against VMAS and MPE)")
     add_bench_arguments(bench)
     bench.set_defaults(func=run_bench_command)
+    from vmas_ros.bench.heuristics import add_evaluate_arguments, run_evaluate_command
+
+    evaluate = sub.add_parser("evaluate", help="every scenario's heuristic against random play: episode returns")
+    add_evaluate_arguments(evaluate)
+    evaluate.set_defaults(func=run_evaluate_command)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
     render.add_argument("--scenario", default="simple_spread", help="scenario name")
     render.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")

@@ -1,0 +1,187 @@
+"""``vmas-ros evaluate``: every scenario's heuristic against random actions, as episode returns.
+
+The README's scenario table is produced by this module, so the numbers there
+can be re-measured by anyone with one command. For each scenario it runs one
+batch of ``num_envs`` episodes with the heuristic and one with uniformly random
+actions (same seed, so the same starts), each at most ``max_steps`` long, and
+records per env:
+
+* the **episode return** of every agent: the sum of its rewards up to and
+  including the step on which the env first reports done (later steps are
+  ignored; there is no auto-reset), averaged over agents and envs;
+* per **team** (agent names up to their trailing ``_<index>``, e.g.
+  ``adversary`` and ``agent``) the same mean, because competitive tasks only
+  make sense per team;
+* the fraction of envs that reported done within ``max_steps`` ("solved" for
+  tasks whose episode ends on success).
+
+Results go to ``<out>.csv`` and ``<out>.md`` (the Markdown table) besides
+being printed.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import re
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import torch
+
+__all__ = ["Evaluation", "evaluate_scenario", "add_evaluate_arguments", "run_evaluate_command", "team_of"]
+
+_TEAM_SUFFIX = re.compile(r"[ _]\d+$")
+
+
+def team_of(agent_name: str) -> str:
+    """The team an agent belongs to, read from its name: ``"adversary_2"`` -> ``"adversary"``."""
+    return _TEAM_SUFFIX.sub("", agent_name) or agent_name
+
+
+@dataclass
+class Evaluation:
+    """Episode statistics of one policy on one scenario."""
+
+    scenario: str
+    policy: str  # "heuristic" or "random"
+    num_envs: int
+    max_steps: int
+    mean_return: float  # over agents and envs
+    team_returns: Dict[str, float] = field(default_factory=dict)
+    done_fraction: float = 0.0
+    mean_episode_length: float = 0.0
+    seconds: float = 0.0
+
+
+def _episode_returns(env, policy, max_steps: int, progress) -> tuple:
+    """Per-agent returns [A, B] and per-env episode lengths [B] of one batched rollout."""
+    obs = env.reset()
+    returns = torch.zeros(env.n_agents, env.num_envs, device=env.device)
+    running = torch.ones(env.num_envs, dtype=torch.bool, device=env.device)
+    length = torch.zeros(env.num_envs, device=env.device)
+    for _ in range(max_steps):
+        if policy is None:
+            actions = env.get_random_actions()
+        else:
+            actions = [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents)]
+        obs, rews, dones, _ = env.step(actions)
+        returns += torch.stack(rews) * running
+        length += running
+        running = running & ~dones
+        if progress is not None:
+            progress.update(1)
+    return returns, length, ~running
+
+
+def evaluate_scenario(
+    name: str, num_envs: int = 32, max_steps: int = 200, seed: int = 0, device: str = "cpu",
+    scenario_kwargs: Optional[dict] = None, progress=None,
+) -> List[Evaluation]:
+    """The heuristic's and random play's :class:`Evaluation` on scenario ``name``."""
+    import vmas_ros
+    from vmas_ros.scenarios import make_heuristic
+
+    kwargs = dict(scenario_kwargs or {})
+    results = []
+    for label in ("heuristic", "random"):
+        env = vmas_ros.make_env(name, num_envs=num_envs, device=device, seed=seed, **kwargs)
+        policy = make_heuristic(name, **kwargs) if label == "heuristic" else None
+        start = time.perf_counter()
+        returns, length, finished = _episode_returns(env, policy, max_steps, progress)
+        teams: Dict[str, List[int]] = {}
+        for i, agent in enumerate(env.agents):
+            teams.setdefault(team_of(agent.name), []).append(i)
+        results.append(Evaluation(
+            scenario=name, policy=label, num_envs=num_envs, max_steps=max_steps,
+            mean_return=float(returns.mean()),
+            team_returns={team: float(returns[rows].mean()) for team, rows in teams.items()},
+            done_fraction=float(finished.float().mean()), mean_episode_length=float(length.mean()),
+            seconds=time.perf_counter() - start,
+        ))
+    return results
+
+
+# ------------------------------------------------------------------- output
+def _teams_text(evaluation: Evaluation) -> str:
+    if len(evaluation.team_returns) < 2:
+        return ""
+    return ", ".join(f"{team} {value:.2f}" for team, value in evaluation.team_returns.items())
+
+
+def format_markdown(results: Sequence[Evaluation]) -> str:
+    """The README table: one row per scenario, heuristic against random."""
+    by_scenario: Dict[str, Dict[str, Evaluation]] = {}
+    for result in results:
+        by_scenario.setdefault(result.scenario, {})[result.policy] = result
+    lines = [
+        "| scenario | heuristic return | random return | heuristic per team | done within episode (heuristic / random) |",
+        "| --- | ---: | ---: | --- | ---: |",
+    ]
+    for name, pair in by_scenario.items():
+        h, r = pair["heuristic"], pair["random"]
+        lines.append(f"| `{name}` | {h.mean_return:.2f} | {r.mean_return:.2f} | {_teams_text(h)} | "
+                     f"{h.done_fraction:.0%} / {r.done_fraction:.0%} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(results: Sequence[Evaluation], out: Path) -> List[Path]:
+    """``<out>.csv`` (one row per scenario and policy) and ``<out>.md`` (the table)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    csv_path, md_path = out.with_suffix(".csv"), out.with_suffix(".md")
+    with csv_path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["scenario", "policy", "num_envs", "max_steps", "mean_return", "team_returns",
+                         "done_fraction", "mean_episode_length", "seconds"])
+        for r in results:
+            teams = ";".join(f"{team}={value:.6g}" for team, value in r.team_returns.items())
+            writer.writerow([r.scenario, r.policy, r.num_envs, r.max_steps, f"{r.mean_return:.6g}", teams,
+                             f"{r.done_fraction:.4g}", f"{r.mean_episode_length:.4g}", f"{r.seconds:.3g}"])
+    md_path.write_text(format_markdown(results))
+    return [csv_path, md_path]
+
+
+# ---------------------------------------------------------------------- CLI
+def add_evaluate_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options of ``vmas-ros evaluate``."""
+    parser.add_argument("--scenarios", nargs="+", default=None, metavar="NAME",
+                        help="scenarios to evaluate (default: all registered)")
+    parser.add_argument("--num-envs", dest="eval_num_envs", type=int, default=32,
+                        help="episodes per policy and scenario, run as one batch (default 32)")
+    parser.add_argument("--max-steps", type=int, default=200, help="episode length cap (default 200)")
+    parser.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    parser.add_argument("--out", default="bench_results/heuristics",
+                        help="output path without suffix: writes .csv and .md (default bench_results/heuristics)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def run_evaluate_command(args: argparse.Namespace) -> int:
+    """Evaluate from parsed options: 0 on success, 2 on bad arguments."""
+    from tqdm import tqdm
+
+    from vmas_ros.scenarios import list_scenarios
+
+    names = args.scenarios or list_scenarios()
+    unknown = [n for n in names if n not in list_scenarios()]
+    if unknown:
+        print(f"vmas-ros evaluate: unknown scenario(s) {', '.join(map(repr, unknown))}; "
+              f"valid: {', '.join(list_scenarios())}", file=sys.stderr)
+        return 2
+    if args.eval_num_envs < 1 or args.max_steps < 1:
+        print(f"vmas-ros evaluate: --num-envs and --max-steps must be >= 1, got {args.eval_num_envs} "
+              f"and {args.max_steps}", file=sys.stderr)
+        return 2
+    results: List[Evaluation] = []
+    with tqdm(total=2 * args.max_steps * len(names), desc="evaluate", unit="step", disable=args.quiet) as bar:
+        for name in names:
+            bar.set_postfix_str(name)
+            results += evaluate_scenario(name, args.eval_num_envs, args.max_steps, args.seed, args.device,
+                                         progress=bar)
+    print(format_markdown(results))
+    for path in write_results(results, Path(args.out)):
+        print(f"wrote {path}")
+    return 0
