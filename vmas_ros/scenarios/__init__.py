@@ -20,7 +20,15 @@ REGISTRY: Dict[str, str] = {
     "simple_spread": "vmas_ros.scenarios.mpe.simple_spread",
     "simple_tag": "vmas_ros.scenarios.mpe.simple_tag",
     "simple_world_comm": "vmas_ros.scenarios.mpe.simple_world_comm",
+    "balance": "vmas_ros.scenarios.balance",
+    "dispersion": "vmas_ros.scenarios.dispersion",
+    "dropout": "vmas_ros.scenarios.dropout",
+    "give_way": "vmas_ros.scenarios.give_way",
+    "passage": "vmas_ros.scenarios.passage",
+    "reverse_transport": "vmas_ros.scenarios.reverse_transport",
+    "transport": "vmas_ros.scenarios.transport",
     "waterfall": "vmas_ros.scenarios.waterfall",
+    "wheel": "vmas_ros.scenarios.wheel",
 }
 
 MPE_SCENARIOS = sorted(name for name, path in REGISTRY.items() if ".mpe." in path)
