@@ -11,17 +11,21 @@ from vmas_ros.bench.common import BENCHMARKS
 
 __all__ = ["add_bench_arguments", "run_bench_command"]
 
+DEFAULT_NUM_ENVS = [1, 10, 100, 1000]  # bench mpe's --num-envs
+
 
 # ---------------------------------------------------------------------- CLI
 def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bool = True) -> argparse.ArgumentParser:
     """Add the ``bench`` options to ``parser``. With ``with_benchmark_name`` a positional
-    benchmark name (only ``mpe`` today, default ``mpe``) is added first, for
-    ``vmas-ros bench mpe ...``; pass False when ``mpe`` is already a subcommand."""
+    benchmark name (``mpe``, the default, or ``suite``) is added first, for
+    ``vmas-ros bench mpe ...``; pass False when ``mpe`` is already a subcommand.
+    Options marked "suite:" only apply to ``vmas-ros bench suite``."""
     if with_benchmark_name:
-        parser.add_argument("benchmark", nargs="?", default="mpe", help="which benchmark: mpe (default)")
+        parser.add_argument("benchmark", nargs="?", default="mpe",
+                            help="which benchmark: mpe (default; the VMAS paper's Fig. 2) or suite (issue 7)")
     # dest is not ``num_envs``: cli.main compares args.num_envs with an int
-    parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=[1, 10, 100, 1000],
-                        metavar="N", help="numbers of parallel envs (default: 1 10 100 1000)")
+    parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=list(DEFAULT_NUM_ENVS),
+                        metavar="N", help="mpe: numbers of parallel envs (default: 1 10 100 1000)")
     parser.add_argument("--steps", type=int, default=100, help="steps per timed run (default 100, as the paper)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per side and num_envs (default 3)")
     parser.add_argument("--warmup", type=int, default=1, help="untimed warm-up runs per side (default 1)")
@@ -35,6 +39,17 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     parser.add_argument("--out", default="bench_results", help="output folder (default bench_results/)")
     parser.add_argument("--no-plot", action="store_true", help="do not write the PNG")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    suite = parser.add_argument_group("suite options (vmas-ros bench suite)")
+    suite.add_argument("--workloads", nargs="+", default=None, metavar="NAME",
+                       help="suite: workloads to run (default: all; an unknown name lists the valid ones)")
+    suite.add_argument("--scale", type=float, default=1.0,
+                       help="suite: multiply every env count by this, at least 1 env (default 1; e.g. 0.01)")
+    suite.add_argument("--curve-envs", type=int, nargs="+", default=None, metavar="N",
+                       help="suite: num_envs of scaling_envs, before --scale (default: 1 10 100 1000 10000 30000)")
+    suite.add_argument("--curve-agents", type=int, nargs="+", default=None, metavar="N",
+                       help="suite: sphere counts of scaling_agents (default: 10 30 100 300 1000)")
+    suite.add_argument("--max-peer-agents", type=int, default=None, metavar="N",
+                       help="suite: run VMAS in scaling_agents only up to N agents; above, omitted (default 100)")
     return parser
 
 
@@ -47,6 +62,10 @@ def run_bench_command(args: argparse.Namespace) -> int:
     if benchmark not in BENCHMARKS:
         print(f"vmas-ros bench: unknown benchmark {benchmark!r}; valid: {', '.join(BENCHMARKS)}", file=sys.stderr)
         return 2
+    if benchmark == "suite":
+        from vmas_ros.bench.suite import run_suite_command
+
+        return run_suite_command(args)
     num_envs = getattr(args, "bench_num_envs", None)
     if num_envs is None:
         num_envs = getattr(args, "num_envs", [1, 10, 100, 1000])

@@ -1,0 +1,248 @@
+"""The benchmark suite (``vmas-ros bench suite``): files, columns, ratios, targets,
+skipped workloads and option errors.
+
+The suite really runs once, at a tiny scale, through the command line; every
+other check reuses that run or feeds made-up rows to the report. Benchmarks are
+measurements, not timed tests: nothing here asserts on speed.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import statistics
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+from vmas_ros.bench import cli as bench_cli
+from vmas_ros.bench import suite
+from vmas_ros.bench.suite_report import SUITE_COLUMNS, TARGETS, evaluate_target, format_suite_table, summarize
+
+HAS_VMAS = "vmas" in suite._mpe.available_peers()
+HAS_MPE = "mpe" in suite._mpe.available_peers()
+RUN = ["spread_1k", "scaling_envs", "scaling_agents", "memory_30k", "mpe_1k", "discovery_1k"]
+ARGV = ["suite", "--workloads", *RUN, "--scale", "0.002", "--steps", "2", "--repeats", "1", "--threads", "1",
+        "--curve-agents", "2", "4", "--max-peer-agents", "2", "--mpe-max-envs", "1", "--no-progress"]
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(prog="vmas-ros bench")
+    bench_cli.add_bench_arguments(parser)
+    return parser.parse_args(argv)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One real run of the command (skipping discovery_1k even once it is registered)."""
+    pytest.importorskip("matplotlib")
+    out = tmp_path_factory.mktemp("suite")
+    patch = pytest.MonkeyPatch()
+    real = suite._scenario_available
+    patch.setattr(suite, "_scenario_available", lambda name: name != "discovery" and real(name))
+    try:
+        code = bench_cli.run_bench_command(_parse(ARGV + ["--out", str(out)]))
+    finally:
+        patch.undo()
+    document = json.loads((out / "suite.json").read_text())
+    return code, out, document
+
+
+def _rows(document, workload):
+    return [r for r in document["rows"] if r["workload"] == workload]
+
+
+def test_command_writes_every_file(run):
+    code, out, document = run
+    assert code == 0
+    for name in ("suite.csv", "suite.json", "suite.md", "suite_envs.png", "suite_agents.png"):
+        assert (out / name).stat().st_size > 0, name
+    for name in ("suite_envs.png", "suite_agents.png"):
+        with Image.open(out / name) as image:
+            pixels = np.asarray(image.convert("RGB"))
+        colours = np.unique(pixels[::4, ::4].reshape(-1, 3), axis=0)
+        assert pixels.shape[0] > 100 and len(colours) > 10, f"{name} is blank"
+    machine = document["machine"]
+    assert machine["torch"] == torch.__version__ and machine["threads"] == [1] and machine["cpu_count"] >= 1
+
+
+def test_csv_has_the_columns_and_one_line_per_row(run):
+    _, out, document = run
+    with open(out / "suite.csv", newline="") as handle:
+        reader = csv.DictReader(handle)
+        lines = list(reader)
+    assert reader.fieldnames == SUITE_COLUMNS
+    assert [(line["workload"], line["side"]) for line in lines] == [
+        (r["workload"], r["side"]) for r in document["rows"]]
+    assert {line["workload"] for line in lines} == set(RUN)
+
+
+def test_measured_rows_are_consistent(run):
+    _, _, document = run
+    ok = [r for r in document["rows"] if r["status"] == "ok"]
+    assert {r["side"] for r in ok} >= {"vmas_ros"} | ({"vmas"} if HAS_VMAS else set())
+    for row in ok:
+        assert row["steps"] == 2 and row["repeats"] == 1 and row["threads"] == 1
+        assert row["median_s"] == pytest.approx(statistics.median(row["times_s"]))
+        if row["metric"] == "time":
+            assert row["value"] == pytest.approx(row["median_s"] / 2 * 1e3) and row["unit"] == "ms/step"
+    assert [r["num_envs"] for r in _rows(document, "spread_1k")] == [2] * len(_rows(document, "spread_1k"))
+    assert sorted({r["num_envs"] for r in _rows(document, "scaling_envs")}) == [1, 2, 20, 60]  # scaled, min 1
+    memory = _rows(document, "memory_30k")
+    assert [r["side"] for r in memory] == ["vmas_ros"] + (["vmas"] if HAS_VMAS else [])
+    for row in memory:
+        assert row["unit"] == "MB" and row["num_envs"] == 60 and len(row["rss_mb"]) == 1
+        assert row["value"] == row["rss_mb"][0] >= row["baseline_rss_mb"] > 0
+
+
+def test_ratios_are_the_ratio_of_the_medians(run):
+    _, _, document = run
+    assert document["summary"] == json.loads(json.dumps(summarize(document["rows"])))
+    checked = 0
+    for entry in document["summary"]:
+        pair = [r for r in document["rows"] if r["workload"] == entry["workload"]
+                and r["num_envs"] == entry["num_envs"] and r["n_agents"] == entry["n_agents"]]
+        ours = next(r for r in pair if r["side"] == "vmas_ros")
+        theirs = next((r for r in pair if r["side"] != "vmas_ros" and r["status"] == "ok"), None)
+        if entry["ratio"] is None:
+            continue
+        expected = (ours["value"] / theirs["value"] if entry["metric"] == "memory"
+                    else theirs["median_s"] / ours["median_s"])
+        assert entry["ratio"] == pytest.approx(expected)
+        checked += 1
+    assert checked >= (6 if HAS_VMAS else 0)
+
+
+def test_mpe_above_the_cap_is_extrapolated(run):
+    _, _, document = run
+    rows = _rows(document, "mpe_1k")
+    if not HAS_MPE:
+        pytest.fail("mpe2 is a test dependency of the benchmarks")
+    (mpe_row,) = [r for r in rows if r["side"] == "mpe"]
+    assert mpe_row["num_envs"] == 2 and mpe_row["measured_envs"] == 1 and mpe_row["extrapolated"] is True
+    (entry,) = [e for e in document["summary"] if e["workload"] == "mpe_1k"]
+    assert entry["peer"] == "mpe" and entry["peer_extrapolated"] is True and entry["target"] == ">= 300x"
+
+
+def test_peer_above_max_peer_agents_is_omitted_not_extrapolated(run):
+    _, out, document = run
+    rows = _rows(document, "scaling_agents")
+    by = {(r["n_agents"], r["side"]): r for r in rows}
+    assert by[(2, "vmas_ros")]["status"] == by[(4, "vmas_ros")]["status"] == "ok"
+    if HAS_VMAS:
+        assert by[(2, "vmas")]["status"] == "ok"
+    assert by[(4, "vmas")]["status"] == "skipped" and "max-peer-agents 2" in by[(4, "vmas")]["note"]
+    assert by[(4, "vmas")].get("median_s") is None
+    assert "VMAS not run at 4 agents" in (out / "suite.md").read_text()
+
+
+def test_unavailable_scenario_is_reported_as_skipped(run):
+    _, out, document = run
+    rows = _rows(document, "discovery_1k")
+    assert {r["side"]: (r["status"], r["note"]) for r in rows} == {
+        "vmas_ros": ("skipped", "scenario not available"), "vmas": ("skipped", "scenario not available")}
+    (line,) = [line for line in (out / "suite.md").read_text().splitlines() if line.startswith("| discovery_1k")]
+    assert "skipped: scenario not available" in line and line.endswith("| n/a |")
+    assert not suite._scenario_available("no_such_scenario")
+
+
+def test_markdown_table_has_the_columns_and_targets(run):
+    _, out, _ = run
+    text = (out / "suite.md").read_text()
+    assert "| workload | envs | agents | vmas_ros ms/step | VMAS ms/step | ratio | target | met? |" in text
+    (line,) = [line for line in text.splitlines() if line.startswith("| memory_30k")]
+    assert "<= 1x" in line and " MB" in line
+    assert "### scaling_envs" in text and "### scaling_agents" in text
+
+
+def _row(workload, side, median_s, value=None, metric="time", **extra):
+    row = {"run_id": "r", "workload": workload, "side": side, "num_envs": 1, "n_agents": 3, "metric": metric,
+           "status": "ok", "note": "", "median_s": median_s, "times_s": [median_s] * 3,
+           "value": value if value is not None or median_s is None else median_s * 10, "extrapolated": False, "steps": 100}
+    row.update(extra)
+    return row
+
+
+@pytest.mark.parametrize("workload,ours,theirs,met", [
+    ("spread_1", 1.0, 5.0, True),  # exactly the target counts as met
+    ("spread_1", 1.0, 4.99, False),
+    ("spheres_100", 0.1, 2.5, True),
+    ("mpe_1k", 1.0, 299.0, False),
+    ("spread_1k", 1.0, 3.0, None),  # no target
+])
+def test_speed_targets_are_evaluated_on_peer_over_ours(workload, ours, theirs, met):
+    peer = "mpe" if workload == "mpe_1k" else "vmas"
+    (entry,) = summarize([_row(workload, "vmas_ros", ours), _row(workload, peer, theirs)])
+    assert entry["ratio"] == pytest.approx(theirs / ours)
+    assert entry["met"] is met
+    assert ("✓ met" if met else "✗ not met" if met is False else "| - | - |") in format_suite_table([entry])
+
+
+@pytest.mark.parametrize("ours,theirs,met", [(900.0, 1000.0, True), (1000.0, 1000.0, True), (1001.0, 1000.0, False)])
+def test_memory_target_is_ours_over_theirs_at_most_one(ours, theirs, met):
+    rows = [_row("memory_30k", "vmas_ros", 1.0, ours, "memory"), _row("memory_30k", "vmas", 1.0, theirs, "memory")]
+    (entry,) = summarize(rows)
+    assert entry["ratio"] == pytest.approx(ours / theirs) and entry["met"] is met
+
+
+def test_no_ratio_without_both_sides_and_targets_table():
+    rows = [_row("transport_10k", "vmas_ros", 1.0), _row("transport_10k", "vmas", None, status="error", note="boom")]
+    (entry,) = summarize(rows)
+    assert entry["ratio"] is None and entry["met"] is None and entry["peer_status"] == "error: boom"
+    assert evaluate_target(None, (">=", 3.0)) is None and evaluate_target(2.0, None) is None
+    assert set(TARGETS) < set(suite.WORKLOADS)
+    with pytest.raises(ValueError, match="'=='"):
+        evaluate_target(1.0, ("==", 1.0))
+
+
+def test_missing_peer_and_failing_workload_do_not_stop_the_suite(monkeypatch, capsys):
+    monkeypatch.setattr(suite._mpe, "_peer_installed", lambda peer: False)
+    rows = suite.run_suite(["spread_1"], steps=1, repeats=1, warmup=0, threads=1, progress=False)
+    assert [(r["side"], r["status"]) for r in rows] == [("vmas_ros", "ok"), ("vmas", "skipped")]
+    assert "not installed" in rows[1]["note"]
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("kaput")
+
+    monkeypatch.setattr(suite, "_env_cases", broken)
+    rows = suite.run_suite(["spread_1", "spheres_100"], steps=1, repeats=1, warmup=0, progress=False, scale=0.01,
+                           peers=[])
+    assert [(r["workload"], r["status"]) for r in rows][:2] == [("spread_1", "error"), ("spread_1", "skipped")]
+    assert "RuntimeError: kaput" in rows[0]["note"] and "kaput" in capsys.readouterr().err
+    assert rows[2]["workload"] == "spheres_100" and rows[2]["status"] == "ok"
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--workloads", "spread_1", "spred_30k"],
+     "'spred_30k' (did you mean 'spread_30k'?); valid workloads: spread_1,"),
+    (["--scale", "0"], "scale must be a finite number > 0 (e.g. 0.01), got 0.0"),
+    (["--scale", "nan"], "got nan"),
+    (["--steps", "0"], "steps must be a positive integer, got 0"),
+    (["--repeats", "-1"], "repeats must be a positive integer, got -1"),
+    (["--warmup", "-1"], "warmup must be a non-negative integer, got -1"),
+    (["--threads", "0"], "threads must be a positive integer or None, got 0"),
+    (["--max-peer-agents", "0"], "max_peer_agents must be a positive integer or None, got 0"),
+    (["--curve-agents", "10", "0"], "curve_agents must be positive integers; bad value(s): [0]"),
+    (["--curve-envs", "-5"], "curve_envs must be positive integers; bad value(s): [-5]"),
+    (["--peers", "vmas", "gazebo"], "unknown peer(s) ['gazebo']; valid peers: ['vmas', 'mpe']"),
+    (["--devices", "cuda"], "cpu only (issue 7); got devices ['cuda']; valid: cpu"),
+    (["--num-envs", "7"], "--num-envs 7 is for 'bench mpe'"),
+])
+def test_bad_options_exit_2_naming_the_value(argv, needle, capsys, tmp_path):
+    args = _parse(["suite"] + argv + ["--out", str(tmp_path / "never"), "--no-progress"])
+    assert bench_cli.run_bench_command(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vmas-ros bench suite: ") and needle in err, err
+    assert not (tmp_path / "never").exists()
+
+
+def test_unknown_benchmark_lists_suite_and_run_suite_validates(capsys):
+    args = _parse(["atari", "--no-progress"])
+    assert bench_cli.run_bench_command(args) == 2
+    assert "unknown benchmark 'atari'; valid: mpe, suite" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="unknown workload 'nope'"):
+        suite.run_suite(["nope"], progress=False)
+    with pytest.raises(ValueError, match="workloads must be a non-empty list"):
+        suite.run_suite("spread_1", progress=False)

@@ -1,0 +1,461 @@
+"""The project's benchmark suite (issue 7): vmas_ros against upstream VMAS 1.5.2 on CPU.
+
+``vmas-ros bench suite`` runs the workloads of :data:`WORKLOADS` and reports each
+speed-up next to the issue's target (see :mod:`vmas_ros.bench.suite_report`).
+
+How each side is measured, and why:
+
+* Both libraries are built in this process with the same scenario name, kwargs
+  and num_envs, and stepped with the *same* random actions (one seeded
+  ``torch.Generator``, drawn uniformly in vmas_ros's action space and shared by
+  both sides), so neither side gets easier inputs.
+* Timing reuses :func:`vmas_ros.bench.timing.time_alternating`: the sides
+  alternate inside every repeat (A B, A B, ...) so noise from other work on a
+  shared machine hits both alike, and medians of ``repeats`` are reported.
+  What is timed is ``steps`` calls of ``env.step`` (or ``World.step``); building,
+  the reset before each repeat and action generation are not.
+* ``spheres_100`` and ``scaling_agents`` build a world of overlapping spheres
+  with each library's own ``World``/``Agent``/``Sphere`` API and time
+  ``World.step`` alone: the engine, without any scenario code.
+* ``memory_30k`` runs each side in a fresh ``python -c`` subprocess that imports
+  only torch and its own library, so one side's allocations never inflate the
+  other's peak RSS.
+* ``mpe_1k`` reuses the MPE case of :mod:`vmas_ros.bench.mpe` (MPE steps one env
+  at a time, as in the VMAS paper; ``mpe_max_envs`` caps and extrapolates).
+* A workload whose scenario is not registered in ``vmas_ros.scenarios`` yet is
+  reported as skipped rather than failing the run; upstream points above
+  ``max_peer_agents`` are omitted (never extrapolated) and the report says so.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import difflib
+import gc
+import importlib
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Dict, List, Mapping, Optional, Sequence
+
+import torch
+
+from vmas_ros.bench import mpe as _mpe
+from vmas_ros.bench.suite_report import format_suite_table, summarize, write_suite_results
+from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
+
+__all__ = ["WORKLOADS", "Workload", "plan_suite", "run_suite", "run_suite_command", "validate_suite_options"]
+
+SIDE, PEER_VMAS, PEER_MPE = "vmas_ros", "vmas", "mpe"
+SPHERE_RADIUS = 0.05
+#: spheres start uniform in a square of side SPHERE_SPACING * sqrt(n): constant density, ~80% covered, so many overlap
+SPHERE_SPACING = 0.1
+CURVE_AGENTS = (10, 30, 100, 300, 1000)
+CURVE_ENVS = (1, 10, 100, 1000, 10000, 30000)
+#: upstream VMAS buckets pairs in a Python loop with a host sync per pair: above this it takes minutes per step
+DEFAULT_MAX_PEER_AGENTS = 100
+
+
+@dataclass(frozen=True)
+class Workload:
+    """One row (or one curve) of the suite; ``num_envs`` is before ``--scale``."""
+
+    name: str
+    kind: str  # env, spheres, agents_curve, envs_curve, memory or mpe
+    scenario: Optional[str]
+    num_envs: int
+    kwargs: Mapping[str, object] = field(default_factory=dict)
+    n_agents: Optional[int] = None  # spheres only
+    peer: str = PEER_VMAS
+
+
+WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
+    Workload("spread_1", "env", "simple_spread", 1),
+    Workload("spread_1k", "env", "simple_spread", 1_000),
+    Workload("spread_30k", "env", "simple_spread", 30_000),
+    Workload("transport_10k", "env", "transport", 10_000),
+    Workload("flocking_10k", "env", "flocking", 10_000),
+    Workload("discovery_1k", "env", "discovery", 1_000),
+    Workload("spheres_100", "spheres", None, 32, n_agents=100),
+    Workload("spread_60", "env", "simple_spread", 32, kwargs={"n_agents": 60}),  # VMAS: as many landmarks
+    Workload("scaling_agents", "agents_curve", None, 1),
+    Workload("scaling_envs", "envs_curve", "simple_spread", 1),
+    Workload("memory_30k", "memory", "simple_spread", 30_000),
+    Workload("mpe_1k", "mpe", "simple_spread", 1_000, peer=PEER_MPE),
+)}
+
+
+@dataclass
+class Unit:
+    """One measured point: a workload at one num_envs (and agent count), both sides."""
+
+    workload: Workload
+    num_envs: int
+    n_agents: Optional[int]
+    sides: List[str]  # sides to measure, vmas_ros first
+    skipped: Dict[str, str]  # side -> why it is not measured
+
+
+# ----------------------------------------------------------------- options
+def _scaled(n: int, scale: float) -> int:
+    return max(1, int(round(n * scale)))
+
+
+def _positive_ints(name: str, values, allow_none: bool = True) -> None:
+    if values is None and allow_none:
+        return
+    if isinstance(values, (int, str)) or not isinstance(values, Sequence) or not values:
+        raise ValueError(f"{name} must be a non-empty list of positive integers, got {values!r}")
+    bad = [v for v in values if isinstance(v, bool) or not isinstance(v, int) or v < 1]
+    if bad:
+        raise ValueError(f"{name} must be positive integers; bad value(s): {bad}")
+
+
+def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs, curve_agents,
+                           max_peer_agents, mpe_max_envs) -> None:
+    """Raise ValueError naming the bad value (and the valid ones) for any bad option."""
+    if workloads is not None:
+        if isinstance(workloads, str) or not workloads:
+            raise ValueError(f"workloads must be a non-empty list of names, got {workloads!r}")
+        for name in workloads:
+            if name not in WORKLOADS:
+                close = difflib.get_close_matches(str(name), WORKLOADS, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ValueError(f"unknown workload {name!r}{hint}; valid workloads: {', '.join(WORKLOADS)}")
+    for name, value in (("steps", steps), ("repeats", repeats)):
+        _mpe._positive_int(name, value)
+    for name, value in (("threads", threads), ("max_peer_agents", max_peer_agents), ("mpe_max_envs", mpe_max_envs)):
+        _mpe._positive_int(name, value, allow_none=True)
+    if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
+        raise ValueError(f"warmup must be a non-negative integer, got {warmup!r}")
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale <= 0:
+        raise ValueError(f"scale must be a finite number > 0 (e.g. 0.01), got {scale!r}")
+    _positive_ints("curve_envs", curve_envs)
+    _positive_ints("curve_agents", curve_agents)
+    if peers is not None:
+        unknown = [p for p in ([peers] if isinstance(peers, str) else peers) if p not in _mpe.PEERS]
+        if isinstance(peers, str) or unknown:
+            raise ValueError(f"unknown peer(s) {unknown or [peers]}; valid peers: {list(_mpe.PEERS)}")
+
+
+def _scenario_available(name: str) -> bool:
+    """Registered in vmas_ros.scenarios (scenarios still being written are not, yet)."""
+    from vmas_ros.scenarios import REGISTRY
+
+    return name in REGISTRY
+
+
+def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, peers: Optional[Sequence[str]] = None,
+               curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
+               max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS) -> List[Unit]:
+    """The points to measure, in workload order, with the reason for every side left out."""
+    names = list(WORKLOADS) if workloads is None else list(dict.fromkeys(workloads))
+    requested = set(_mpe.PEERS if peers is None else peers)
+    units: List[Unit] = []
+    for name in names:
+        w = WORKLOADS[name]
+        peer_reason = None
+        if w.peer not in requested:
+            peer_reason = f"peer {w.peer} not requested (--peers)"
+        elif not _mpe._peer_installed(w.peer):
+            peer_reason = f"{_mpe._PEER_MODULE[w.peer]} not installed ({_mpe._PEER_INSTALL[w.peer]})"
+        if w.kind == "agents_curve":
+            points = [(1, n) for n in sorted(set(curve_agents or CURVE_AGENTS))]
+        elif w.kind == "envs_curve":
+            points = [(n, None) for n in sorted({_scaled(n, scale) for n in (curve_envs or CURVE_ENVS)})]
+        else:
+            points = [(_scaled(w.num_envs, scale), w.n_agents or w.kwargs.get("n_agents"))]
+        for num_envs, n_agents in points:
+            skipped: Dict[str, str] = {}
+            if w.scenario is not None and not _scenario_available(w.scenario):
+                skipped = {SIDE: "scenario not available", w.peer: "scenario not available"}
+            elif peer_reason:
+                skipped[w.peer] = peer_reason
+            elif w.kind == "agents_curve" and max_peer_agents is not None and n_agents > max_peer_agents:
+                skipped[w.peer] = (f"omitted: above --max-peer-agents {max_peer_agents} "
+                                   f"(upstream is O(pairs) with host syncs; not extrapolated)")
+            sides = [s for s in (SIDE, w.peer) if s not in skipped]
+            units.append(Unit(w, num_envs, n_agents, sides, skipped))
+    return units
+
+
+# ------------------------------------------------------------------- cases
+def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int):
+    make = importlib.import_module("vmas_ros" if side == SIDE else "vmas").make_env
+    return make(scenario, num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed, **dict(kwargs))
+
+
+def _action_bounds(env) -> List[tuple]:
+    return [(torch.as_tensor(s.low), torch.as_tensor(s.high)) for s in env.action_space.spaces]
+
+
+def _random_actions(bounds, num_envs: int, steps: int, seed: int) -> List[List[torch.Tensor]]:
+    """``steps`` lists of one [num_envs, dim] tensor per agent, uniform in the bounds, from one seeded generator."""
+    generator = torch.Generator().manual_seed(seed)
+    return [[low + (high - low) * torch.rand(num_envs, low.numel(), generator=generator) for low, high in bounds]
+            for _ in range(steps)]
+
+
+def _env_cases(unit: Unit, steps: int, seed: int) -> Dict[str, Case]:
+    """One env per side, the same actions for both (drawn in vmas_ros's action space)."""
+    w = unit.workload
+    envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed) for side in unit.sides}
+    first = envs[unit.sides[0]]
+    unit.n_agents = first.n_agents
+    dims = {side: [int(low.numel()) for low, _ in _action_bounds(env)] for side, env in envs.items()}
+    if len({tuple(d) for d in dims.values()}) > 1:
+        raise RuntimeError(f"{w.name}: the sides' action spaces differ: {dims}")
+    actions = _random_actions(_action_bounds(first), unit.num_envs, steps, seed)
+    cases = {}
+    for side, env in envs.items():
+        env.reset()
+
+        def run(env=env):
+            for action in actions:
+                env.step(action)
+
+        cases[side] = Case(run=run, setup=env.reset, device="cpu")
+    return cases
+
+
+def _spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int) -> Case:
+    """``n_agents`` overlapping spheres built with the side's own World/Agent/Sphere; times World.step."""
+    core = importlib.import_module("vmas_ros.simulator.core" if side == SIDE else "vmas.simulator.core")
+    world = core.World(batch_dim=num_envs, device="cpu")
+    for i in range(n_agents):
+        world.add_agent(core.Agent(name=f"sphere_{i}", shape=core.Sphere(radius=SPHERE_RADIUS)))
+    world.reset(None)
+    generator = torch.Generator().manual_seed(seed)
+    pos = (torch.rand(n_agents, num_envs, 2, generator=generator) - 0.5) * (SPHERE_SPACING * math.sqrt(n_agents))
+    force = torch.rand(n_agents, num_envs, 2, generator=generator) * 2 - 1
+
+    def setup():  # the same start and action forces before every run, on both sides
+        for agent, p, f in zip(world.agents, pos, force):
+            agent.set_pos(p.clone(), batch_index=None)
+            agent.set_vel(torch.zeros(num_envs, 2), batch_index=None)
+            agent.state.force = f.clone()
+
+    def run():
+        for _ in range(steps):
+            world.step()
+
+    setup()
+    return Case(run=run, setup=setup, device="cpu")
+
+
+def _time_row(run_id: str, unit: Unit, side: str, steps: int, timing: Timing, measured_envs: int, loadavg) -> dict:
+    """mpe.py's row (medians, extrapolation to num_envs), plus the suite's columns."""
+    row = _mpe._row(run_id, side, "cpu", unit.num_envs, steps, timing, measured_envs, unit.num_envs, loadavg)
+    row.update(scenario=unit.workload.scenario or "spheres", metric="time", value=row["per_step_ms"],
+               unit="ms/step", rss_mb=None, baseline_rss_mb=None)
+    return row
+
+
+def _other_row(run_id: str, unit: Unit, side: str, steps: int, threads: int, status: str, note: str) -> dict:
+    return {"run_id": run_id, "scenario": unit.workload.scenario or "spheres", "side": side, "device": "cpu",
+            "num_envs": unit.num_envs, "steps": steps, "repeats": 0, "threads": threads, "times_s": [],
+            "status": status, "note": note, "metric": "memory" if unit.workload.kind == "memory" else "time"}
+
+
+# ------------------------------------------------------------------ memory
+# Peak RSS is the kernel's high-water mark (VmHWM). It is reset after the imports
+# (Linux /proc/self/clear_refs "5") so that a transient peak while importing torch
+# cannot hide the env's own use; elsewhere ru_maxrss since process start is used.
+_MEMORY_SCRIPT = r"""
+import gc, json, resource, sys, time
+import torch
+cfg = json.loads(sys.argv[1])
+torch.set_num_threads(cfg["threads"])
+from importlib import import_module
+make_env = import_module(cfg["module"]).make_env
+def status_mb(key):
+    try:
+        with open("/proc/self/status") as handle:
+            for line in handle:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024
+gc.collect()
+try:
+    with open("/proc/self/clear_refs", "w") as handle:
+        handle.write("5")
+except OSError:
+    pass
+baseline = status_mb("VmRSS")
+n = cfg["num_envs"]
+env = make_env(cfg["scenario"], num_envs=n, device="cpu", continuous_actions=True, seed=cfg["seed"], **cfg["kwargs"])
+env.reset()
+g = torch.Generator().manual_seed(cfg["seed"])
+bounds = [(torch.as_tensor(s.low), torch.as_tensor(s.high)) for s in env.action_space.spaces]
+start = time.perf_counter()
+for _ in range(cfg["steps"]):
+    env.step([lo + (hi - lo) * torch.rand(n, lo.numel(), generator=g) for lo, hi in bounds])
+seconds = time.perf_counter() - start
+print(json.dumps({"peak_rss_mb": status_mb("VmHWM"), "baseline_rss_mb": baseline, "seconds": seconds,
+                  "n_agents": env.n_agents}))
+"""
+
+
+def _memory_run(side: str, unit: Unit, steps: int, threads: int, seed: int) -> dict:
+    """Peak RSS (MiB) of a fresh interpreter that imports only torch and ``side``'s library and steps it."""
+    config = {"module": "vmas_ros" if side == SIDE else "vmas", "scenario": unit.workload.scenario,
+              "num_envs": unit.num_envs, "kwargs": dict(unit.workload.kwargs), "steps": steps, "threads": threads,
+              "seed": seed}
+    environ = dict(os.environ)
+    root = str(Path(importlib.import_module("vmas_ros").__file__).resolve().parent.parent)  # source checkouts too
+    environ["PYTHONPATH"] = os.pathsep.join(p for p in (root, environ.get("PYTHONPATH")) if p)
+    done = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT, json.dumps(config)], capture_output=True,
+                          text=True, env=environ, check=False)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+    if done.returncode != 0 or not lines:
+        raise RuntimeError(f"memory subprocess for {side} failed (exit {done.returncode}): {done.stderr[-800:]}")
+    return json.loads(lines[-1])
+
+
+def _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run) -> List[dict]:
+    results: Dict[str, List[dict]] = {side: [] for side in unit.sides}
+    for index in range(repeats):  # alternate the sides, as time_alternating does
+        for side in unit.sides:
+            results[side].append(_memory_run(side, unit, steps, threads, seed))
+            on_run(side, index, results[side][-1]["seconds"])
+    rows = []
+    for side, runs in results.items():
+        unit.n_agents = runs[0]["n_agents"]
+        times = [r["seconds"] for r in runs]
+        timing = Timing(times_s=times, median_s=statistics.median(times), min_s=min(times), max_s=max(times),
+                        repeats=repeats, warmup=0, threads=threads)
+        row = _time_row(run_id, unit, side, steps, timing, unit.num_envs, loadavg)
+        rss = [r["peak_rss_mb"] for r in runs]
+        row.update(metric="memory", value=statistics.median(rss), unit="MB", rss_mb=rss, peak_rss_mb=max(rss),
+                   baseline_rss_mb=statistics.median(r["baseline_rss_mb"] for r in runs))
+        rows.append(row)
+    return rows
+
+
+# ------------------------------------------------------------------ runner
+def _measure(unit: Unit, run_id: str, steps: int, repeats: int, warmup: int, threads: int, mpe_max_envs,
+             seed: int, on_run: Callable) -> List[dict]:
+    w, loadavg = unit.workload, _mpe._loadavg()
+    if w.kind == "memory":  # no warm-up: each run is a fresh process, as a user's first run would be
+        return _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run)
+    measured = {side: unit.num_envs for side in unit.sides}
+    if w.kind == "mpe":
+        cases = {SIDE: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps)}
+        if PEER_MPE in unit.sides:
+            measured[PEER_MPE] = min(unit.num_envs, mpe_max_envs or unit.num_envs)
+            cases[PEER_MPE] = _mpe._mpe_case(measured[PEER_MPE], steps, seed)
+        unit.n_agents = _mpe.N_AGENTS
+    elif w.kind in ("spheres", "agents_curve"):
+        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed) for side in unit.sides}
+    else:
+        cases = _env_cases(unit, steps, seed)
+    timings = time_alternating(cases, repeats=repeats, warmup=warmup, on_run=on_run)
+    rows = [_time_row(run_id, unit, side, steps, timings[side], measured[side], loadavg) for side in unit.sides]
+    del cases, timings
+    return rows
+
+
+def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repeats: int = 3, warmup: int = 1,
+              scale: float = 1.0, threads: Optional[int] = None, peers: Optional[Sequence[str]] = None,
+              curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
+              max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS, mpe_max_envs: Optional[int] = None,
+              seed: int = 0, progress: bool = True) -> List[dict]:
+    """Measure the chosen workloads (default all); one row per (workload, point, side).
+
+    Every row has ``status``: ``ok``, ``skipped`` (``note`` says why: scenario not
+    available, peer missing, above ``max_peer_agents``) or ``error`` (the exception,
+    also printed on stderr; the other workloads still run). Raises ValueError for
+    bad options. ``threads`` pins torch threads here and in the memory subprocesses.
+    """
+    validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs, curve_agents,
+                           max_peer_agents, mpe_max_envs)
+    units = plan_suite(workloads, scale, peers, curve_envs, curve_agents, max_peer_agents)
+    run_id = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+    from tqdm import tqdm
+
+    rows: List[dict] = []
+    total = sum(repeats * len(u.sides) for u in units)
+    with pinned_threads(threads) as in_effect, tqdm(total=total, disable=not progress, desc="bench suite",
+                                                    unit="run", file=sys.stderr, dynamic_ncols=True) as bar:
+        for unit in units:
+            label = f"{unit.workload.name} {unit.num_envs} envs" + (
+                f" {unit.n_agents} agents" if unit.workload.kind == "agents_curve" else "")
+            bar.set_postfix_str(f"{label}: building", refresh=True)
+
+            done = [0]
+
+            def on_run(side, index, seconds, label=label, done=done):
+                bar.set_postfix_str(f"{label}: {side} #{index + 1} {seconds:.3g}s", refresh=False)
+                bar.update(1)
+                done[0] += 1
+
+            measured: List[dict] = []
+            if unit.sides:
+                try:
+                    measured = _measure(unit, run_id, steps, repeats, warmup, in_effect, mpe_max_envs, seed, on_run)
+                except Exception as error:  # one broken workload must not lose an hour of others
+                    traceback.print_exc(file=sys.stderr)
+                    message = f"{type(error).__name__}: {error}"
+                    measured = [_other_row(run_id, unit, s, steps, in_effect, "error", message) for s in unit.sides]
+                    bar.update(repeats * len(unit.sides) - done[0])  # the runs it will not do
+            for row in measured:
+                row.setdefault("status", "ok")
+                row.setdefault("note", "")
+            skipped = [_other_row(run_id, unit, s, steps, in_effect, "skipped", why) for s, why in unit.skipped.items()]
+            for row in sorted(measured + skipped, key=lambda r: r["side"] != SIDE):
+                row.update(workload=unit.workload.name, n_agents=unit.n_agents)
+                rows.append(row)
+            gc.collect()
+    return rows
+
+
+# --------------------------------------------------------------------- CLI
+def run_suite_command(args) -> int:
+    """``vmas-ros bench suite``: 0 when every measured workload ran, 1 if one errored, 2 on bad options."""
+    from vmas_ros.bench.cli import DEFAULT_NUM_ENVS
+
+    options = dict(
+        workloads=getattr(args, "workloads", None), steps=args.steps, repeats=getattr(args, "repeats", 3),
+        warmup=getattr(args, "warmup", 1), scale=getattr(args, "scale", 1.0), threads=getattr(args, "threads", None),
+        peers=getattr(args, "peers", None), curve_envs=getattr(args, "curve_envs", None),
+        curve_agents=getattr(args, "curve_agents", None), mpe_max_envs=getattr(args, "mpe_max_envs", None),
+        max_peer_agents=getattr(args, "max_peer_agents", None),
+    )
+    if options["max_peer_agents"] is None:
+        options["max_peer_agents"] = DEFAULT_MAX_PEER_AGENTS
+    try:
+        validate_suite_options(**options)
+        devices = getattr(args, "devices", None) or ["cpu"]
+        if [d for d in devices if d != "cpu"]:
+            raise ValueError(f"the suite runs on cpu only (issue 7); got devices {devices}; valid: cpu")
+        num_envs = getattr(args, "bench_num_envs", None)
+        if num_envs is not None and list(num_envs) != list(DEFAULT_NUM_ENVS):
+            raise ValueError(f"--num-envs {' '.join(map(str, num_envs))} is for 'bench mpe'; the suite takes "
+                             f"--scale and --curve-envs")
+    except ValueError as error:
+        print(f"vmas-ros bench suite: {error}", file=sys.stderr)
+        return 2
+    plot = not getattr(args, "no_plot", False)
+    if plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            print("note: matplotlib is not installed (pip install 'vmas_ros[bench]'); no PNG will be written",
+                  file=sys.stderr)
+            plot = False
+    rows = run_suite(progress=not getattr(args, "no_progress", False), **options)
+    paths = write_suite_results(rows, getattr(args, "out", "bench_results"), plot=plot)
+    print(format_suite_table(summarize(rows)))
+    print()
+    for path in paths.values():
+        print(f"wrote {path}")
+    return 1 if any(r["status"] == "error" for r in rows) else 0
+

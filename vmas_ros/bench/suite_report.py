@@ -1,0 +1,287 @@
+"""Results of the benchmark suite (:mod:`vmas_ros.bench.suite`): ratios against the
+issue's targets, the markdown tables, the two plots and the files in ``--out``.
+
+Kept apart from the runner so a report can be rebuilt from saved or synthetic
+rows (the tests feed it rows they made up to check the met/not-met logic).
+Ratios are always ratios of the medians of one run, never of different runs.
+"""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+from vmas_ros.bench.common import _LABEL
+from vmas_ros.bench.report import _csv_value, machine_info
+
+__all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "summarize",
+           "write_suite_results"]
+
+#: issue 7's targets: (op, value) on the ratio. Time: peer / vmas_ros (speed-up, higher
+#: is better). Memory: vmas_ros / peer peak RSS (lower is better).
+TARGETS: Dict[str, Tuple[str, float]] = {
+    "spread_1": (">=", 5.0),
+    "spread_30k": (">=", 2.0),
+    "transport_10k": (">=", 3.0),
+    "flocking_10k": (">=", 10.0),
+    "discovery_1k": (">=", 10.0),
+    "spheres_100": (">=", 20.0),
+    "spread_60": (">=", 50.0),
+    "memory_30k": ("<=", 1.0),
+    "mpe_1k": (">=", 300.0),
+}
+#: curve workloads and the variable on their x axis
+CURVES = {"scaling_envs": "num_envs", "scaling_agents": "n_agents"}
+
+SUITE_COLUMNS = [
+    "run_id", "workload", "scenario", "side", "status", "note", "device", "num_envs", "n_agents", "steps",
+    "repeats", "metric", "value", "unit", "median_s", "min_s", "max_s", "per_step_ms", "env_steps_per_s",
+    "extrapolated", "measured_envs", "threads", "times_s", "rss_mb", "baseline_rss_mb", "peak_rss_mb",
+    "loadavg_1m",
+]
+
+
+# ------------------------------------------------------------------ ratios
+def evaluate_target(ratio: Optional[float], target: Optional[Tuple[str, float]]) -> Optional[bool]:
+    """True/False when there is both a ratio and a target, else None."""
+    if ratio is None or target is None:
+        return None
+    op, value = target
+    if op == ">=":
+        return ratio >= value
+    if op == "<=":
+        return ratio <= value
+    raise ValueError(f"unknown target operator {op!r}; valid: '>=', '<='")
+
+
+def _status(row: Optional[dict]) -> str:
+    if row is None:
+        return "missing"
+    if row.get("status", "ok") == "ok":
+        return "ok"
+    return f"{row['status']}: {row.get('note', '')}".rstrip(": ")
+
+
+def summarize(rows: Sequence[dict], targets: Mapping[str, Tuple[str, float]] = TARGETS) -> List[dict]:
+    """One entry per measured point (workload, num_envs, n_agents) of each run, in row order:
+    both sides' values, the ratio of their medians, the target and whether it is met."""
+    groups: Dict[tuple, Dict[str, dict]] = {}
+    for row in rows:
+        key = (row["run_id"], row["workload"], row["num_envs"], row.get("n_agents"))
+        groups.setdefault(key, {})[row["side"]] = row
+    summary = []
+    for (run_id, workload, num_envs, n_agents), sides in groups.items():
+        ours = sides.get("vmas_ros")
+        peer_name = next((side for side in sides if side != "vmas_ros"), "vmas")
+        theirs = sides.get(peer_name)
+        ours_ok, theirs_ok = _status(ours) == "ok", _status(theirs) == "ok"
+        metric = (ours or theirs)["metric"]
+        ratio = None
+        if ours_ok and theirs_ok:
+            ratio = (ours["value"] / theirs["value"] if metric == "memory"
+                     else theirs["median_s"] / ours["median_s"])
+        target = None if workload in CURVES else targets.get(workload)
+        summary.append({
+            "run_id": run_id, "workload": workload, "num_envs": num_envs, "n_agents": n_agents, "metric": metric,
+            "unit": "MB" if metric == "memory" else "ms/step", "peer": peer_name,
+            "vmas_ros": ours["value"] if ours_ok else None,
+            "peer_value": theirs["value"] if theirs_ok else None,
+            "vmas_ros_env_steps_per_s": ours.get("env_steps_per_s") if ours_ok else None,
+            "peer_env_steps_per_s": theirs.get("env_steps_per_s") if theirs_ok else None,
+            "vmas_ros_baseline_mb": ours.get("baseline_rss_mb") if ours_ok else None,
+            "peer_baseline_mb": theirs.get("baseline_rss_mb") if theirs_ok else None,
+            "ratio": ratio,
+            "ratio_kind": "vmas_ros / peer peak RSS" if metric == "memory" else "peer time / vmas_ros time",
+            "target": None if target is None else f"{target[0]} {target[1]:g}x",
+            "met": evaluate_target(ratio, target),
+            "status": _status(ours), "peer_status": _status(theirs),
+            "peer_extrapolated": bool(theirs.get("extrapolated")) if theirs_ok else False,
+        })
+    return summary
+
+
+# ------------------------------------------------------------------- table
+def _value(entry: dict, side: str) -> str:
+    """A median with its unit, or why there is none (a reason shared by both sides is shown once)."""
+    value = entry["vmas_ros" if side == "vmas_ros" else "peer_value"]
+    status = entry["status" if side == "vmas_ros" else "peer_status"]
+    if value is None:
+        if status in ("ok", "missing") or (side != "vmas_ros" and status == entry["status"]):
+            return "-"
+        return "omitted" if "omitted" in status else status
+    if entry["unit"] == "MB":  # peak, and how much of it came after the imports
+        base = entry["vmas_ros_baseline_mb" if side == "vmas_ros" else "peer_baseline_mb"]
+        return f"{value:,.0f} MB" + ("" if base is None else f" (+{value - base:,.0f})")
+    text = (f"{value:.3f}" if value < 100 else f"{value:,.1f}")
+    return text + ("\\*" if side != "vmas_ros" and entry["peer_extrapolated"] else "")
+
+
+def _ratio(entry: dict) -> str:
+    if entry["ratio"] is None:
+        return "-"
+    return f"{entry['ratio']:.2f}x" + ("\\*" if entry["peer_extrapolated"] else "")
+
+
+def _met(entry: dict) -> str:
+    if entry["target"] is None:
+        return "-"
+    return {True: "✓ met", False: "✗ not met", None: "n/a"}[entry["met"]]
+
+
+def _main_table(entries: List[dict]) -> List[str]:
+    head = ["workload", "envs", "agents", "vmas_ros ms/step", "VMAS ms/step", "ratio", "target", "met?"]
+    lines = ["| " + " | ".join(head) + " |", "|---|---:|---:|---:|---:|---:|---:|---|"]
+    for e in entries:
+        name = e["workload"] + (f" (vs {_LABEL.get(e['peer'], e['peer'])})" if e["peer"] != "vmas" else "")
+        cells = [name, str(e["num_envs"]), "-" if e["n_agents"] is None else str(e["n_agents"]),
+                 _value(e, "vmas_ros"), _value(e, "peer"), _ratio(e), e["target"] or "-", _met(e)]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _curve_table(workload: str, entries: List[dict]) -> List[str]:
+    x = CURVES[workload]
+    if x == "num_envs":
+        head = ["num_envs", "vmas_ros ms/step", "VMAS ms/step", "vmas_ros env-steps/s", "VMAS env-steps/s", "speed-up"]
+    else:
+        head = ["agents", "vmas_ros ms/step", "VMAS ms/step", "speed-up"]
+    lines = [f"### {workload}", "", "| " + " | ".join(head) + " |", "|" + "|".join("---:" for _ in head) + "|"]
+    for e in entries:
+        cells = [str(e[x]), _value(e, "vmas_ros"), _value(e, "peer")]
+        if x == "num_envs":
+            cells += ["-" if e[k] is None else f"{e[k]:,.0f}"
+                      for k in ("vmas_ros_env_steps_per_s", "peer_env_steps_per_s")]
+        lines.append("| " + " | ".join(cells + [_ratio(e)]) + " |")
+    return lines
+
+
+def format_suite_table(summary: Sequence[dict]) -> str:
+    """The markdown report: one table of the workloads with targets, one per curve, and notes."""
+    if not summary:
+        return "(no results)"
+    main = [e for e in summary if e["workload"] not in CURVES]
+    lines: List[str] = _main_table(main) if main else []
+    for workload in CURVES:
+        entries = [e for e in summary if e["workload"] == workload]
+        if entries:
+            lines += ([""] if lines else []) + _curve_table(workload, entries)
+    lines += ["", "ratio: peer median time / vmas_ros median time (speed-up) for step times; vmas_ros peak RSS / "
+              "VMAS peak RSS for memory_30k (MB, each side in a fresh process; (+N): the part above the RSS "
+              "after importing torch and the library). Sides alternate inside each repeat; ratios are of the "
+              "medians of this run."]
+    if any(e["peer_extrapolated"] for e in summary):
+        lines.append("\\* MPE was stepped for fewer envs (--mpe-max-envs) and its time scaled linearly.")
+    omitted = sorted({e["n_agents"] for e in summary if e["peer_status"].startswith("skipped: omitted")})
+    if omitted:
+        lines.append(f"VMAS not run at {', '.join(map(str, omitted))} agents (--max-peer-agents): omitted, "
+                     f"not extrapolated.")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------- plots
+def _title(info: dict, what: str) -> str:
+    threads = "/".join(map(str, info["threads"]))
+    return (f"{what}\ntorch {info['torch']}, {threads} torch thread(s), {info['cpus_usable']} of "
+            f"{info['cpu_count']} CPUs ({info.get('cpu_model') or 'CPU'}), {(info['date'] or '')[:10]}")
+
+
+def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> bool:
+    """Log-log plot of one curve, both sides, min-max of the repeats as bars; False if nothing to plot."""
+    x_key = CURVES[workload]
+    ok = [r for r in rows if r["workload"] == workload and r.get("status") == "ok"]
+    if not ok:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+
+    colors = {"vmas_ros": "tab:green", "vmas": "tab:blue"}
+    steps = ok[0]["steps"]
+    fig, ax = plt.subplots(figsize=(8, 5), dpi=110)
+    for side in ("vmas_ros", "vmas"):
+        line = sorted((r for r in ok if r["side"] == side), key=lambda r: r[x_key])
+        if not line:
+            continue
+        xs = [r[x_key] for r in line]
+        if x_key == "num_envs":  # throughput: higher is better
+            ys = [r["env_steps_per_s"] for r in line]
+            low = [r["num_envs"] * steps / r["max_s"] for r in line]
+            high = [r["num_envs"] * steps / r["min_s"] for r in line]
+        else:
+            ys = [r["per_step_ms"] for r in line]
+            low = [r["min_s"] / steps * 1e3 for r in line]
+            high = [r["max_s"] / steps * 1e3 for r in line]
+        ax.plot(xs, ys, marker="o", color=colors[side], label=f"{_LABEL[side]} (CPU)")
+        ax.vlines(xs, low, high, color=colors[side], alpha=0.5)
+    omitted = sorted(r[x_key] for r in rows if r["workload"] == workload and "omitted" in (r.get("note") or ""))
+    if omitted:
+        ax.plot([], [], linestyle="none", label=f"VMAS omitted at {', '.join(map(str, omitted))} (not extrapolated)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ticks = sorted({r[x_key] for r in rows if r["workload"] == workload})
+    ax.xaxis.set_major_locator(FixedLocator(ticks))
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:,.0f}"))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:,.4g}"))
+    ax.yaxis.set_minor_formatter(FuncFormatter(lambda value, _: ""))
+    if x_key == "num_envs":
+        ax.set_xlabel("number of parallel environments")
+        ax.set_ylabel("env-steps per second")
+        what = f"simple_spread throughput vs parallel envs ({steps} steps per run)"
+    else:
+        ax.set_xlabel("number of colliding sphere agents (1 env)")
+        ax.set_ylabel("ms per World.step")
+        what = f"World.step time vs agents, overlapping spheres ({steps} steps per run)"
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="best", fontsize=8, title=f"bars: min-max of {ok[0]['repeats']} repeats", title_fontsize=8)
+    ax.set_title(_title(info, what), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return True
+
+
+# ------------------------------------------------------------------- files
+def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str, Path]:
+    """Write ``suite.csv`` (one row per workload point and side, every repeat), ``suite.json``
+    (rows, summary, machine info), ``suite.md`` and, with ``plot``, ``suite_envs.png`` /
+    ``suite_agents.png`` for the curves that were measured. Returns the paths by kind."""
+    if not rows:
+        raise ValueError("no rows to write")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [dict(r) for r in rows]
+    info = machine_info(rows)
+    summary = summarize(rows)
+    paths = {"csv": out / "suite.csv", "json": out / "suite.json", "md": out / "suite.md"}
+    with open(paths["csv"], "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=SUITE_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: _csv_value(row.get(k)) for k in SUITE_COLUMNS})
+    notes = [
+        "Timed: steps calls of env.step (World.step for spheres_100 and scaling_agents); building, the reset "
+        "before each repeat and the random actions (one seeded generator, shared by both sides) are not.",
+        "Sides alternate inside every repeat; ratios are of the medians of this run.",
+        "memory_30k: peak RSS of a fresh python process per side and repeat (torch + that library only); "
+        "baseline_rss_mb is its RSS after the imports. For the other rows peak_rss_mb is this process's "
+        "high-water mark when the point ended, both sides together.",
+        "mpe_1k: MPE (mpe2) steps one env at a time, as in the VMAS paper; vmas_ros uses its own random actions.",
+    ]
+    document = {"benchmark": "suite", "machine": info, "targets": {k: list(v) for k, v in TARGETS.items()},
+                "notes": notes, "rows": rows, "summary": summary}
+    with open(paths["json"], "w", encoding="utf-8") as handle:
+        json.dump(document, handle, indent=2, allow_nan=False)
+    header = ("# Benchmark suite: vmas_ros vs VMAS 1.5.2 (issue 7)\n\n"
+              + _title(info, f"{'/'.join(map(str, sorted({r['steps'] for r in rows})))} steps per run").replace(
+                  "\n", ". ") + "\n\n")
+    paths["md"].write_text(header + format_suite_table(summary) + "\n", encoding="utf-8")
+    if plot:
+        for workload, kind in (("scaling_envs", "envs_png"), ("scaling_agents", "agents_png")):
+            path = out / f"suite_{'envs' if kind == 'envs_png' else 'agents'}.png"
+            if _plot_curve(rows, workload, path, info):
+                paths[kind] = path
+    return paths
