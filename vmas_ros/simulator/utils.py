@@ -184,6 +184,19 @@ class TorchUtils:
         return torch.where(mask, new_value, old_value)
 
 
+def selected_env_count(batch_dim: int, env_index) -> int:
+    """How many envs a reset selector picks: None (all), an int, a sequence or tensor of
+    indices, or a boolean mask over the batch (reset time only: a mask costs a host read)."""
+    if env_index is None:
+        return batch_dim
+    if isinstance(env_index, int):
+        return 1
+    index = torch.as_tensor(env_index)
+    if index.dim() == 0:
+        return 1
+    return int(index.sum()) if index.dtype == torch.bool else int(index.numel())
+
+
 class ScenarioUtils:
     """Helpers for writing scenarios: random non-overlapping spawns and kwargs checks."""
 
@@ -198,8 +211,12 @@ class ScenarioUtils:
         occupied_positions: Optional[Tensor] = None,
         disable_warn: bool = False,
     ) -> None:
-        """Place ``entities`` uniformly in the bounds, at least ``min_dist`` from each other."""
-        batch_size = world.batch_dim if env_index is None else 1
+        """Place ``entities`` uniformly in the bounds, at least ``min_dist`` from each other.
+
+        ``env_index`` selects the envs to place in: None, an int, indices or a mask
+        (each selected env gets its own draw).
+        """
+        batch_size = selected_env_count(world.batch_dim, env_index)
         if occupied_positions is None:
             occupied_positions = torch.zeros((batch_size, 0, world.dim_p), device=world.device)
         for entity in entities:
@@ -208,7 +225,8 @@ class ScenarioUtils:
                 x_bounds, y_bounds, disable_warn,
             )
             occupied_positions = torch.cat([occupied_positions, pos], dim=1)
-            entity.set_pos(pos.squeeze(1), batch_index=env_index)
+            pos = pos.squeeze(1)
+            entity.set_pos(pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
     @staticmethod
     def find_random_pos_for_entity(
@@ -225,7 +243,7 @@ class ScenarioUtils:
         Only the envs whose sample overlaps are redrawn, so the loop runs a handful
         of times regardless of the number of envs.
         """
-        batch_size = world.batch_dim if env_index is None else 1
+        batch_size = selected_env_count(world.batch_dim, env_index)
 
         def draw() -> Tensor:
             low = torch.tensor([x_bounds[0], y_bounds[0]], device=world.device, dtype=torch.float32)
