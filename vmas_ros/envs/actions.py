@@ -42,6 +42,8 @@ def to_action_tensor(action, agent_name: str, num_envs: int, size: int, device: 
 
 def check_finite_and_range(actions: List[Tensor], lows: List[Tensor], highs: List[Tensor], names: List[str], what: str) -> None:
     """Raise ValueError for NaN/inf or out-of-range entries; one host read for all agents."""
+    if not actions:  # every agent is scripted (e.g. football with both teams on AI)
+        return
     bad = torch.stack(
         [((~torch.isfinite(a)) | (a < lo) | (a > hi)).any() for a, lo, hi in zip(actions, lows, highs)]
     )

@@ -23,6 +23,7 @@ REGISTRY: Dict[str, str] = {
     "balance": "vmas_ros.scenarios.balance",
     "dispersion": "vmas_ros.scenarios.dispersion",
     "dropout": "vmas_ros.scenarios.dropout",
+    "football": "vmas_ros.scenarios.football",
     "give_way": "vmas_ros.scenarios.give_way",
     "passage": "vmas_ros.scenarios.passage",
     "reverse_transport": "vmas_ros.scenarios.reverse_transport",
