@@ -21,7 +21,9 @@ from vmas_ros.simulator.utils import LINE_MIN_DIST
 
 N = 8
 STEPS = 50
-ATOL = 1e-6
+#: float32 kernels take vectorised paths for a batch and scalar paths for one env, which
+#: round the last bit differently; 50 steps of piled-up contacts grow that to ~1e-6
+ATOL = 1e-5
 FIELDS = ("pos", "vel", "rot", "ang_vel")
 
 

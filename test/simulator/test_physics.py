@@ -153,17 +153,17 @@ def test_pair_forces_are_equal_and_opposite(device, case):
     assert len(tables.pairs) == 1
     pair = tables.pairs[0]
     state = physics.BodyState(
-        pos=torch.stack([e.state.pos for e in world.entities], dim=1),
-        vel=torch.stack([e.state.vel for e in world.entities], dim=1),
-        rot=torch.stack([e.state.rot for e in world.entities], dim=1),
-        ang_vel=torch.stack([e.state.ang_vel for e in world.entities], dim=1),
+        pos=torch.stack([e.state.pos for e in world.entities]),
+        vel=torch.stack([e.state.vel for e in world.entities]),
+        rot=torch.stack([e.state.rot for e in world.entities]),
+        ang_vel=torch.stack([e.state.ang_vel for e in world.entities]),
     )
     f_a, f_b, t_a, t_b = physics.pair_forces(pair, state, world._step_params())
     assert float(f_a.norm()) > 1e-3, "the configuration must actually be in contact"
     assert torch.equal(f_a, -f_b)
     # the two forces act along one line: torques about the origin cancel (angular momentum)
     ia, ib = pair.index_a, pair.index_b
-    r_a, r_b = state.pos[:, ia], state.pos[:, ib]
+    r_a, r_b = state.pos[ia], state.pos[ib]
     total_torque = physics.cross(r_a, f_a) + physics.cross(r_b, f_b) + t_a + t_b
     assert float(total_torque.abs().max()) < 1e-5 * float(f_a.norm())
 

@@ -1,7 +1,9 @@
 """Per-entity property tables and contact pair lists, built once per world layout.
 
-The step is a fixed sequence of batched kernels over ``[batch, n_entities, ...]``
-tensors. Everything that does not change from step to step (masses, limits,
+The step is a fixed sequence of batched kernels over ``[n_entities, batch, ...]``
+tensors (entity-major: each entity's ``[batch, ...]`` block is contiguous, so a
+per-entity constant broadcasts over one long contiguous run instead of
+alternating every two floats). Everything that does not change from step to step (masses, limits,
 which pairs can touch and with which kernel) is gathered here into tensors
 when entities are added or a property changes, never inside the step.
 """
@@ -35,7 +37,7 @@ class PairTable:
     kind: Tuple[str, str]
     index_a: Tensor  # [P] long
     index_b: Tensor  # [P] long
-    params: Dict[str, Tensor] = field(default_factory=dict)  # each [P]
+    params: Dict[str, Tensor] = field(default_factory=dict)  # each [P, 1] (broadcasts over the batch)
 
     @property
     def index_ab(self) -> Tensor:
@@ -54,9 +56,9 @@ class JointTable:
     constraints: list
     index_a: Tensor  # [J]
     index_b: Tensor  # [J]
-    anchor_a: Tensor  # [J, 2] body-frame offsets
-    anchor_b: Tensor  # [J, 2]
-    dist: Tensor  # [J]
+    anchor_a: Tensor  # [J, 1, 2] body-frame offsets
+    anchor_b: Tensor  # [J, 1, 2]
+    dist: Tensor  # [J, 1]
     rotate: Tensor  # [J] bool
 
     @property
@@ -70,24 +72,24 @@ class WorldTables:
 
     n_entities: int
     n_agents: int
-    mass: Tensor  # [N, 1]
-    inertia: Tensor  # [N, 1]
-    movable: Tensor  # [N, 1] bool
-    rotatable: Tensor  # [N, 1] bool
-    drag: Tensor  # [N, 1]
-    linear_friction: Tensor  # [N, 1]
-    angular_friction: Tensor  # [N, 1]
+    mass: Tensor  # [N, 1, 1]
+    inertia: Tensor  # [N, 1, 1]
+    movable: Tensor  # [N, 1, 1] bool
+    rotatable: Tensor  # [N, 1, 1] bool
+    drag: Tensor  # [N, 1, 1]
+    linear_friction: Tensor  # [N, 1, 1]
+    angular_friction: Tensor  # [N, 1, 1]
     has_friction: bool
-    gravity_force: Tensor  # [1 or B, N, 2] mass * (world + entity gravity)
+    gravity_force: Tensor  # [N, 1 or B, 2] mass * (world + entity gravity)
     has_gravity: bool
-    max_speed: Tensor  # [N, 1], inf when unlimited
-    v_range: Tensor  # [N, 1], inf when unlimited
-    agent_max_f: Tensor  # [A, 1]
-    agent_f_range: Tensor  # [A, 1]
-    agent_max_t: Tensor  # [A, 1]
-    agent_t_range: Tensor  # [A, 1]
-    agent_movable: Tensor  # [A, 1] bool
-    agent_rotatable: Tensor  # [A, 1] bool
+    max_speed: Tensor  # [N, 1, 1], inf when unlimited
+    v_range: Tensor  # [N, 1, 1], inf when unlimited
+    agent_max_f: Tensor  # [A, 1, 1]
+    agent_f_range: Tensor  # [A, 1, 1]
+    agent_max_t: Tensor  # [A, 1, 1]
+    agent_t_range: Tensor  # [A, 1, 1]
+    agent_movable: Tensor  # [A, 1, 1] bool
+    agent_rotatable: Tensor  # [A, 1, 1] bool
     pairs: List[PairTable]
     joints: JointTable | None
 
@@ -97,7 +99,7 @@ def _value_or(value, default: float) -> float:
 
 
 def _column(values, device, dtype=torch.float32) -> Tensor:
-    return torch.tensor(values, device=device, dtype=dtype).reshape(-1, 1)
+    return torch.tensor(values, device=device, dtype=dtype).reshape(-1, 1, 1)
 
 
 def _pair_collides(world, a, b) -> bool:
@@ -145,7 +147,7 @@ def build_pairs(world, entities) -> List[PairTable]:
             }
             for ia, ib in pairs
         ]
-        params = {key: torch.tensor([row[key] for row in rows], device=device) for key in rows[0]}
+        params = {key: torch.tensor([row[key] for row in rows], device=device).reshape(-1, 1) for key in rows[0]}
         tables.append(
             PairTable(
                 kind=kind,
@@ -169,9 +171,11 @@ def build_joints(world, entities) -> JointTable | None:
         constraints=constraints,
         index_a=torch.tensor([index[id(c.entity_a)] for c in constraints], device=device, dtype=torch.long),
         index_b=torch.tensor([index[id(c.entity_b)] for c in constraints], device=device, dtype=torch.long),
-        anchor_a=torch.tensor([c.entity_a.shape.get_delta_from_anchor(c.anchor_a) for c in constraints], device=device),
-        anchor_b=torch.tensor([c.entity_b.shape.get_delta_from_anchor(c.anchor_b) for c in constraints], device=device),
-        dist=torch.tensor([float(c.dist) for c in constraints], device=device),
+        anchor_a=torch.tensor([c.entity_a.shape.get_delta_from_anchor(c.anchor_a) for c in constraints],
+                              device=device).reshape(-1, 1, 2),
+        anchor_b=torch.tensor([c.entity_b.shape.get_delta_from_anchor(c.anchor_b) for c in constraints],
+                              device=device).reshape(-1, 1, 2),
+        dist=torch.tensor([float(c.dist) for c in constraints], device=device).reshape(-1, 1),
         rotate=torch.tensor([bool(c.rotate) for c in constraints], device=device),
     )
 
@@ -190,7 +194,7 @@ def _gravity_force(world, entities) -> Tuple[Tensor, bool]:
         rows.append(g * e.mass)
     if batched:
         rows = [r.expand(world.batch_dim, 2) for r in rows]
-    force = torch.stack(rows, dim=1)  # [1 or B, N, 2]
+    force = torch.stack(rows, dim=0)  # [N, 1 or B, 2]
     has_gravity = bool((force != 0).any())
     return force, has_gravity
 

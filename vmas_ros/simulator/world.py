@@ -1,7 +1,7 @@
 """The world: owns the entities of a batch of envs and steps them together.
 
 Public API follows VMAS 1.5's ``World``. Internally a step gathers every
-entity's state into ``[batch, n_entities, ...]`` tensors (one ``stack`` per
+entity's state into ``[n_entities, batch, ...]`` tensors (one ``stack`` per
 quantity), runs :func:`vmas_ros.simulator.physics.step`, and hands each
 entity a view of the result. Property tables are cached and rebuilt only when
 the set of entities or one of their physical properties changes.
@@ -81,6 +81,8 @@ class World:
         self._landmarks: List[Landmark] = []
         self._joint_constraints: Dict[frozenset, object] = {}
         self._tables: Optional[WorldTables] = None
+        #: field -> (the entity tensors it was stacked from, their versions, the stack)
+        self._stacks: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
 
@@ -208,41 +210,64 @@ class World:
         if not entities:
             return
         state = physics.BodyState(
-            pos=torch.stack([e.state._pos for e in entities], dim=1),
-            vel=torch.stack([e.state._vel for e in entities], dim=1),
-            rot=torch.stack([e.state._rot for e in entities], dim=1),
-            ang_vel=torch.stack([e.state._ang_vel for e in entities], dim=1),
+            pos=torch.stack([e.state._pos for e in entities]),
+            vel=torch.stack([e.state._vel for e in entities]),
+            rot=torch.stack([e.state._rot for e in entities]),
+            ang_vel=torch.stack([e.state._ang_vel for e in entities]),
         )
         force, torque = self._action_forces(tables, state)
         fixed_rotation = None
         if tables.joints is not None:
             fixed_rotation = self._joint_fixed_rotations(tables)
         new = physics.step(state, tables, self._step_params(), force, torque, fixed_rotation)
-        for e, pos, vel, rot, ang_vel in zip(
-            entities, new.pos.unbind(1), new.vel.unbind(1), new.rot.unbind(1), new.ang_vel.unbind(1)
-        ):
+        views = {name: getattr(new, name).unbind(0) for name in ("pos", "vel", "rot", "ang_vel")}
+        for e, pos, vel, rot, ang_vel in zip(entities, views["pos"], views["vel"], views["rot"], views["ang_vel"]):
             s = e.state
             s._pos, s._vel, s._rot, s._ang_vel = pos, vel, rot, ang_vel
+        # the stacks of the new state exist already: hand them to stacked_state for free
+        for name, parts in views.items():
+            self._stacks[name] = (list(parts), [t._version for t in parts], getattr(new, name))
         if self._dim_c > 0:
             for agent in self._agents:
                 if not agent.silent and agent.action.c is not None:
                     agent.state._c = agent.action.c
 
+    def stacked_state(self, field: str = "pos") -> Tensor:
+        """``[n_entities, batch, D]``: a state field of every entity, in ``entities`` order.
+
+        Scenarios that score or observe all entities at once use this instead
+        of stacking per-entity tensors themselves: right after a step it is the
+        physics output itself (no copy), and it is rebuilt only when some
+        entity's tensor was replaced or written in place since (tracked by
+        identity and torch's version counter, so it is never stale). Treat it
+        as read-only: it shares memory with the entities' states.
+        Agents are the last ``len(agents)`` rows (``entities`` is landmarks then agents).
+        """
+        current = [getattr(e.state, field) for e in self.entities]
+        cached = self._stacks.get(field)
+        if cached is not None:
+            parts, versions, stack = cached
+            if len(parts) == len(current) and all(
+                a is b and a._version == v for a, b, v in zip(parts, current, versions)
+            ):
+                return stack
+        stack = torch.stack(current)
+        self._stacks[field] = (current, [t._version for t in current], stack)
+        return stack
+
     def _action_forces(self, tables: WorldTables, state: physics.BodyState) -> Tuple[Tensor, Tensor]:
         """Agents' clamped action forces/torques scattered into per-entity tensors."""
         n_agents = tables.n_agents
-        zeros_f = torch.zeros_like(state.pos)
-        zeros_t = torch.zeros_like(state.rot)
         if n_agents == 0:
-            return zeros_f, zeros_t
-        agent_force = torch.stack([a.state._force for a in self._agents], dim=1)
-        agent_torque = torch.stack([a.state._torque for a in self._agents], dim=1)
+            return torch.zeros_like(state.pos), torch.zeros_like(state.rot)
+        agent_force = torch.stack([a.state._force for a in self._agents])
+        agent_torque = torch.stack([a.state._torque for a in self._agents])
         agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
         agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
         agent_torque = physics.clamp_norm(agent_torque, tables.agent_max_t)
         agent_torque = torch.maximum(torch.minimum(agent_torque, tables.agent_t_range), -tables.agent_t_range)
         # clamped actions are visible to scenarios, as in VMAS
-        for agent, f, t in zip(self._agents, agent_force.unbind(1), agent_torque.unbind(1)):
+        for agent, f, t in zip(self._agents, agent_force.unbind(0), agent_torque.unbind(0)):
             if agent.movable:
                 agent.state._force = f
             if agent.rotatable:
@@ -250,12 +275,14 @@ class World:
         agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
         agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
         n_landmarks = tables.n_entities - n_agents
-        force = torch.cat([zeros_f[:, :n_landmarks], agent_force], dim=1)
-        torque = torch.cat([zeros_t[:, :n_landmarks], agent_torque], dim=1)
+        if n_landmarks == 0:
+            return agent_force, agent_torque
+        force = torch.cat([agent_force.new_zeros((n_landmarks, *agent_force.shape[1:])), agent_force])
+        torque = torch.cat([agent_torque.new_zeros((n_landmarks, *agent_torque.shape[1:])), agent_torque])
         return force, torque
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
-        """[B or 1, J, 1] target relative angles; tensors when a joint follows its line."""
+        """[J, B, 1] target relative angles; tensors when a joint follows its line."""
         values = []
         for c in tables.joints.constraints:
             value = c.fixed_rotation
@@ -263,7 +290,7 @@ class World:
                 values.append(value.reshape(-1, 1).to(self._device).expand(self._batch_dim, 1))
             else:
                 values.append(torch.full((self._batch_dim, 1), float(value), device=self._device))
-        return torch.stack(values, dim=1)
+        return torch.stack(values)
 
     # ------------------------------------------------------------------- queries
     def _pick(self, value: Tensor, env_index) -> Tensor:

@@ -45,6 +45,15 @@ class Scenario(BaseScenario):
         for i in range(n_agents):
             world.add_landmark(Landmark(name=f"landmark {i}", collide=False, color=Color.BLACK))
         self._reward_cache = None
+        n_landmarks = n_agents
+        #: per observing agent, the rows of world.stacked_state() it sees relative to itself:
+        #: every landmark, then (with obs_agents) every other agent; entities are landmarks then agents
+        self._seen_rows = [
+            list(range(n_landmarks)) + ([n_landmarks + j for j in range(n_agents) if j != i] if self.obs_agents else [])
+            for i in range(n_agents)
+        ]
+        self._seen_rows_on: dict = {}  # device -> one index tensor per agent
+        self._radius_sums = None
         return world
 
     def reset_world_at(self, env_index=None) -> None:
@@ -54,33 +63,37 @@ class Scenario(BaseScenario):
             pos = torch.empty(rows, world.dim_p, device=world.device).uniform_(-1.0, 1.0)
             entity.set_pos(pos if env_index is None else pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
-    def _positions(self):
-        agents = torch.stack([a.state.pos for a in self.world.agents], dim=1)  # [B, A, 2]
-        landmarks = torch.stack([l.state.pos for l in self.world.landmarks], dim=1)  # [B, L, 2]
-        return agents, landmarks
+    def _agents_and_landmarks(self):
+        """Entity-major positions [A, B, 2] and [L, B, 2] (views of the world's stacked state)."""
+        stacked = self.world.stacked_state("pos")
+        n_landmarks = len(self.world.landmarks)
+        return stacked[n_landmarks:], stacked[:n_landmarks]
 
     def reward(self, agent: Agent) -> torch.Tensor:
         if agent is self.world.agents[0]:
-            agents, landmarks = self._positions()
-            n_agents = agents.shape[1]
-            coverage = torch.cdist(agents, landmarks).amin(dim=1).sum(dim=-1)  # [B]
-            radii = torch.tensor([a.shape.radius for a in self.world.agents], device=agents.device)
-            collides = torch.tensor([a.collide for a in self.world.agents], device=agents.device)
-            gaps = torch.linalg.vector_norm(agents.unsqueeze(2) - agents.unsqueeze(1), dim=-1)
-            overlap = gaps < radii.unsqueeze(0) + radii.unsqueeze(1)
-            overlap = overlap & collides.view(1, -1, 1) & ~torch.eye(n_agents, dtype=torch.bool, device=agents.device)
-            self._reward_cache = -n_agents * coverage - overlap.sum(dim=(1, 2)).float()
+            agents, landmarks = self._agents_and_landmarks()
+            n_agents = agents.shape[0]
+            # each landmark's distance to its nearest agent, summed over landmarks: [A, L, B] -> [B]
+            gaps = torch.linalg.vector_norm(agents.unsqueeze(1) - landmarks.unsqueeze(0), dim=-1)
+            coverage = gaps.amin(dim=0).sum(dim=0)
+            if self._radius_sums is None or self._radius_sums.device != agents.device:
+                radii = torch.tensor([a.shape.radius for a in self.world.agents], device=agents.device)
+                collides = torch.tensor([a.collide for a in self.world.agents], device=agents.device)
+                eligible = collides.view(-1, 1) & ~torch.eye(n_agents, dtype=torch.bool, device=agents.device)
+                # pairs that cannot count get a threshold no distance is below
+                self._radius_sums = torch.where(eligible, radii.view(-1, 1) + radii.view(1, -1), -1.0).unsqueeze(-1)
+            spacing = torch.linalg.vector_norm(agents.unsqueeze(1) - agents.unsqueeze(0), dim=-1)  # [A, A, B]
+            overlaps = (spacing < self._radius_sums).sum(dim=(0, 1))
+            self._reward_cache = -n_agents * coverage - overlaps.float()
         return self._reward_cache
 
     def observation(self, agent: Agent) -> torch.Tensor:
-        agents, landmarks = self._positions()
-        parts = [agent.state.pos, agent.state.vel, (landmarks - agent.state.pos.unsqueeze(1)).flatten(1)]
-        if self.obs_agents:
-            others = [a for a in self.world.agents if a is not agent]
-            if others:
-                other_pos = torch.stack([a.state.pos for a in others], dim=1)
-                parts.append((other_pos - agent.state.pos.unsqueeze(1)).flatten(1))
-        return torch.cat(parts, dim=-1)
+        stacked = self.world.stacked_state("pos")
+        rows = self._seen_rows_on.get(stacked.device)
+        if rows is None:
+            rows = self._seen_rows_on[stacked.device] = [torch.tensor(r, device=stacked.device) for r in self._seen_rows]
+        relative = stacked.index_select(0, rows[self.world.agents.index(agent)]) - agent.state.pos
+        return torch.cat([agent.state.pos, agent.state.vel, relative.transpose(0, 1).flatten(1)], dim=-1)
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):
