@@ -31,6 +31,7 @@ from __future__ import annotations
 import torch
 
 from vmas_ros.scenarios import food as foodlib
+from vmas_ros.scenarios.common import for_index, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -91,13 +92,13 @@ class Scenario(BaseScenario):
 
     def reset_world_at(self, env_index=None) -> None:
         world = self.world
-        rows = foodlib.selected_rows(world, env_index)
+        rows = selected_rows(world.batch_dim, env_index)
         origin = torch.zeros(rows, world.dim_p, device=world.device)
         for agent in world.agents:
-            agent.set_pos(foodlib.for_index(origin, env_index), batch_index=env_index)
+            agent.set_pos(for_index(origin, env_index), batch_index=env_index)
         spots = foodlib.uniform_positions(world, env_index, self.n_food, -self.pos_range, self.pos_range)
         for k, landmark in enumerate(world.landmarks):
-            landmark.set_pos(foodlib.for_index(spots[:, k], env_index), batch_index=env_index)
+            landmark.set_pos(for_index(spots[:, k], env_index), batch_index=env_index)
         if env_index is None:
             self.eaten.zero_()
             self._fresh.zero_()

@@ -34,6 +34,7 @@ import math
 import torch
 
 from vmas_ros.scenarios import food as foodlib
+from vmas_ros.scenarios.common import for_index, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -87,7 +88,7 @@ class Scenario(BaseScenario):
 
     def reset_world_at(self, env_index=None) -> None:
         world = self.world
-        rows = foodlib.selected_rows(world, env_index)
+        rows = selected_rows(world.batch_dim, env_index)
         if self.start_same_point:
             agents = torch.zeros(rows, self.n_agents, world.dim_p, device=world.device)
             goal = foodlib.spread_positions(
@@ -97,8 +98,8 @@ class Scenario(BaseScenario):
             spots = foodlib.spread_positions(world, env_index, self.n_agents + 1, SPAWN_GAP, -SPAWN_BOUND, SPAWN_BOUND)
             agents, goal = spots[:, :-1], spots[:, -1:]
         for i, agent in enumerate(world.agents):
-            agent.set_pos(foodlib.for_index(agents[:, i], env_index), batch_index=env_index)
-        self._goal.set_pos(foodlib.for_index(goal[:, 0], env_index), batch_index=env_index)
+            agent.set_pos(for_index(agents[:, i], env_index), batch_index=env_index)
+        self._goal.set_pos(for_index(goal[:, 0], env_index), batch_index=env_index)
         selected = slice(None) if env_index is None else env_index
         for flags in (self.eaten, self._reached):
             flags[selected] = False

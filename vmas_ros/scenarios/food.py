@@ -15,19 +15,8 @@ from collections.abc import Sequence
 
 import torch
 
+from vmas_ros.scenarios.common import selected_rows
 from vmas_ros.simulator.core import Entity, World
-
-
-def selected_rows(world: World, env_index) -> int:
-    """How many envs ``env_index`` selects."""
-    if env_index is None:
-        return world.batch_dim
-    return 1 if isinstance(env_index, int) else len(env_index)
-
-
-def for_index(values: torch.Tensor, env_index) -> torch.Tensor:
-    """``values`` drawn for ``selected_rows`` envs ([rows, ...]) shaped for ``set_pos(..., batch_index=env_index)``."""
-    return values[0] if isinstance(env_index, int) else values
 
 
 def stacked_pos(entities: Sequence[Entity]) -> torch.Tensor:
@@ -70,7 +59,7 @@ def show_food(food: Sequence[Entity], env_index) -> None:
 
 def uniform_positions(world: World, env_index, count: int, low: float, high: float) -> torch.Tensor:
     """``count`` positions per selected env, uniform in [low, high]^2: [rows, count, 2]."""
-    rows = selected_rows(world, env_index)
+    rows = selected_rows(world.batch_dim, env_index)
     return torch.empty(rows, count, world.dim_p, device=world.device).uniform_(low, high)
 
 
@@ -91,7 +80,7 @@ def spread_positions(
     ``ScenarioUtils.spawn_entities_randomly`` this also serves a batch of env
     indices. Returns [rows, count, 2].
     """
-    rows = selected_rows(world, env_index)
+    rows = selected_rows(world.batch_dim, env_index)
     placed = occupied if occupied is not None else torch.empty(rows, 0, world.dim_p, device=world.device)
     first = placed.shape[1]
     for _ in range(count):

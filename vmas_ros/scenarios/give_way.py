@@ -48,6 +48,8 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import for_index as shaped_for
+from vmas_ros.scenarios.common import selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
@@ -109,18 +111,6 @@ def map_layout(mirror_passage: bool) -> list[Wall]:
     if not mirror_passage:
         walls.append(Wall("floor", LENGTH, 0.0, -half_corridor, False, False))
     return walls
-
-
-def selected_rows(batch_dim: int, env_index) -> int:
-    """How many envs ``env_index`` (None, an int or an index tensor) selects."""
-    if env_index is None:
-        return batch_dim
-    return 1 if isinstance(env_index, int) else len(env_index)
-
-
-def shaped_for(value: Tensor, env_index) -> Tensor:
-    """Rows ``[n, ...]`` shaped for ``set_pos(..., batch_index=env_index)`` (one row for an int)."""
-    return value[0] if isinstance(env_index, int) else value
 
 
 class Scenario(BaseScenario):

@@ -1,8 +1,8 @@
 """Pieces shared by the package-pushing tasks (``transport``, ``reverse_transport``).
 
 * kwargs: ``check_count`` and ``check_positive`` (ValueError naming the value);
-* env selectors: ``selected_rows`` (how many envs a reset draws for) and
-  ``place`` (write those draws with ``set_pos``, whatever the selector);
+* env selectors: ``place`` (write per-env draws with ``set_pos``, whatever the
+  selector; ``vmas_ros.scenarios.common`` counts the selected envs);
 * spawning: ``spawn_apart``, batched rejection sampling of positions kept a
   minimum distance from each other and from already occupied points;
 * delivery bookkeeping: ``delivery_reward`` (the shaped reward of packages
@@ -22,6 +22,7 @@ from numbers import Real
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import for_index
 from vmas_ros.simulator.utils import Color
 
 #: an env selector as ``reset_world_at`` receives it: all envs, one env, or a 1-D index tensor
@@ -46,18 +47,9 @@ def check_positive(scenario: str, name: str, value) -> float:
 
 
 # ------------------------------------------------------------------ env selectors
-def selected_rows(batch_dim: int, env_index: EnvIndex) -> int:
-    """How many envs ``env_index`` selects (``None``: all of them)."""
-    if env_index is None:
-        return batch_dim
-    if isinstance(env_index, int):
-        return 1
-    return len(env_index)
-
-
 def place(entity, pos: Tensor, env_index: EnvIndex) -> None:
     """``entity.set_pos`` with ``pos`` drawn per selected env ([rows, 2]), for any selector."""
-    entity.set_pos(pos[0] if isinstance(env_index, int) else pos, batch_index=env_index)
+    entity.set_pos(for_index(pos, env_index), batch_index=env_index)
 
 
 # ----------------------------------------------------------------------- spawning

@@ -37,6 +37,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import for_index as shaped_for
+from vmas_ros.scenarios.common import selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -57,18 +59,6 @@ COLLISION_PENALTY = 10.0
 CROSS = ((SPACING, 0.0), (0.0, SPACING), (-SPACING, 0.0), (0.0, -SPACING), (0.0, 0.0))
 #: how far the cross centre stays from the walls and from the barrier
 MARGIN = 3 * AGENT_RADIUS + SPACING
-
-
-def selected_rows(batch_dim: int, env_index) -> int:
-    """How many envs ``env_index`` (None, an int or an index tensor) selects."""
-    if env_index is None:
-        return batch_dim
-    return 1 if isinstance(env_index, int) else len(env_index)
-
-
-def shaped_for(value: Tensor, env_index) -> Tensor:
-    """Rows ``[n, ...]`` shaped for ``set_pos(..., batch_index=env_index)`` (one row for an int)."""
-    return value[0] if isinstance(env_index, int) else value
 
 
 def random_permutations(rows: int, n: int, device) -> Tensor:

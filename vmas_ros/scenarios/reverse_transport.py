@@ -38,6 +38,7 @@ import math
 import torch
 
 from vmas_ros.scenarios import packages as pk
+from vmas_ros.scenarios.common import selected_rows
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -99,7 +100,7 @@ class Scenario(BaseScenario):
     # ------------------------------------------------------------------- reset
     def reset_world_at(self, env_index: pk.EnvIndex = None) -> None:
         world = self.world
-        rows = pk.selected_rows(world.batch_dim, env_index)
+        rows = selected_rows(world.batch_dim, env_index)
         box = torch.empty(rows, 2, device=world.device).uniform_(-SPAWN_HALF_SIDE, SPAWN_HALF_SIDE)
         inner = (self.package_length / 2 - AGENT_RADIUS, self.package_width / 2 - AGENT_RADIUS)
         offsets = pk.spawn_apart(

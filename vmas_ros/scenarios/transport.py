@@ -35,6 +35,7 @@ import math
 import torch
 
 from vmas_ros.scenarios import packages as pk
+from vmas_ros.scenarios.common import selected_rows
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -94,7 +95,7 @@ class Scenario(BaseScenario):
     # ------------------------------------------------------------------- reset
     def reset_world_at(self, env_index: pk.EnvIndex = None) -> None:
         world = self.world
-        rows = pk.selected_rows(world.batch_dim, env_index)
+        rows = selected_rows(world.batch_dim, env_index)
         bounds = {"low": (-SPAWN_HALF_SIDE,) * 2, "high": (SPAWN_HALF_SIDE,) * 2, "device": world.device}
         agents = pk.spawn_apart(rows, self.n_agents, 2 * AGENT_RADIUS, what="agents", **bounds)
         landmarks = pk.spawn_apart(

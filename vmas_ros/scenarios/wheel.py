@@ -32,6 +32,7 @@ import math
 
 import torch
 
+from vmas_ros.scenarios.common import uniform_rows as uniform_for
 from vmas_ros.simulator.core import Agent, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -43,17 +44,6 @@ PIVOT_RADIUS = 0.02
 DT = 0.1
 #: name -> default of every kwarg (the heuristic takes them too)
 DEFAULTS = {"n_agents": 4, "line_length": 2.0, "line_mass": 30.0, "desired_velocity": 0.05}
-
-
-def rows_of(world: World, env_index) -> int:
-    """How many envs ``env_index`` (None, an int, or a 1-D index tensor) selects."""
-    return world.batch_dim if env_index is None else 1 if isinstance(env_index, int) else len(env_index)
-
-
-def uniform_for(world: World, env_index, size: int, low: float, high: float) -> torch.Tensor:
-    """Uniform values [rows, size] shaped for ``set_*(..., batch_index=env_index)`` ([size] for an int index)."""
-    values = torch.empty(rows_of(world, env_index), size, device=world.device).uniform_(low, high)
-    return values[0] if isinstance(env_index, int) else values
 
 
 def validate(config: dict) -> None:
