@@ -21,6 +21,11 @@ def pytest_configure(config):
     if not os.environ.get("ROS_DOMAIN_ID"):
         os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    # One torch thread for the whole session: the tests step small batches, which run
+    # fastest on one thread, and on a busy 2-core machine (CI, or sim_node subprocesses
+    # beside the test process) two contended threads make tiny kernels such as
+    # index_add take milliseconds instead of microseconds. Results do not depend on it.
+    torch.set_num_threads(1)
 
 
 @pytest.fixture(params=_available_devices())

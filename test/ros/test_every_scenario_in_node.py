@@ -7,6 +7,7 @@ import math
 import pytest
 import rclpy
 
+import vmas_ros
 from vmas_ros.ros.sim_node import SimNode
 from vmas_ros.scenarios import list_scenarios
 
@@ -36,7 +37,11 @@ def test_scenario_steps_and_publishes_in_sim_node(scenario, rclpy_context, monke
         if any(a.movable for a in node.env.world.agents):  # simple_crypto's agents only talk
             assert start != end, "the heuristic moves someone"
         scans = list(node.scan_msgs.values())
-        assert scans and all(len(s.ranges) == 6 for s in scans)
+        # one scan per lidar: the scenario's own (their ray counts) or the node's 6-ray one
+        lidars = [s for a in node.env.world.agents for s in a.sensors if hasattr(s, "n_rays")]
+        assert scans and sorted(len(s.ranges) for s in scans) == sorted(lidar.n_rays for lidar in lidars)
+        if not any(a.sensors for a in vmas_ros.make_env(scenario, num_envs=1).world.agents):
+            assert all(len(s.ranges) == 6 for s in scans)
         assert len(node.markers.markers) == len(node.env.world.entities)
     finally:
         node.destroy_node()

@@ -30,15 +30,6 @@ FIXTURES = [
 ]
 
 
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """One torch thread: on a loaded 2-core machine extra threads only add contention."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
-
-
 def make(num_envs: int = 8, **kwargs):
     return harness.make(football.Scenario(), num_envs, **kwargs)
 

@@ -24,15 +24,6 @@ PENALTIES = {
 }
 
 
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """Small batches run fastest on one thread (and do not fight the other test runs for cores)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def make(num_envs: int = 8, **kwargs):
     return harness.make(give_way.Scenario(), num_envs, **kwargs)
 

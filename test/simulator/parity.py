@@ -36,8 +36,9 @@ def copy_random_state(up, ours, seed: int, spread: float, agents_only: bool = Fa
             "ang_vel": (torch.rand(batch, 1, generator=gen) * 2 - 1) * 0.5,
         }
         for field_name, value in values.items():
-            getattr(e_up, f"set_{field_name}")(value.to(up.device), batch_index=None)
-            getattr(e_ours, f"set_{field_name}")(value.to(ours.device), batch_index=None)
+            # each world its own copy: setters keep the tensor, and upstream writes some in place
+            getattr(e_up, f"set_{field_name}")(value.to(up.device).clone(), batch_index=None)
+            getattr(e_ours, f"set_{field_name}")(value.to(ours.device).clone(), batch_index=None)
 
 
 def copy_state(up, ours) -> None:

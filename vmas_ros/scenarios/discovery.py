@@ -1,0 +1,361 @@
+"""discovery: agents find targets with their lidars and cover each one together.
+
+Description
+    ``n_agents`` blue discs (radius 0.05) and ``n_targets`` static green
+    discs (radius 0.05) inside walls at ``+-x_semidim``, ``+-y_semidim``. A
+    target is covered when at least ``agents_per_target`` agents have their
+    centres within ``covering_range`` of its centre. Agents see targets only
+    through a lidar (``n_lidar_rays_entities`` rays, range ``lidar_range``)
+    and, with ``use_agent_lidar``, each other through a second lidar
+    (``n_lidar_rays_agents`` rays starting at 0.05 rad). Paper, "Multi-robot
+    scenarios": a variation of the Stick Pulling Experiment.
+Observation (per agent, in this order)
+    own position (2), own velocity (2), target lidar distances
+    (``n_lidar_rays_entities``, ray ``k`` at ``2 pi k / n``), then with
+    ``use_agent_lidar`` the agent lidar distances (``n_lidar_rays_agents``,
+    ray ``k`` at ``0.05 + 2 pi k / n``). A ray that hits nothing reads
+    ``lidar_range``.
+Reward
+    Each agent earns ``covering_rew_coeff`` per covered target it is within
+    ``covering_range`` of (with ``shared_reward``, every agent earns the
+    team's total halved instead), ``agent_collision_penalty`` per other
+    agent whose surface is closer than 0.005, and ``time_penalty`` every step.
+Starting state
+    Targets then agents uniform in the arena, every two at least
+    ``min_dist_between_entities`` apart. After the rewards of a step, each
+    covered target moves: with ``targets_respawn`` to a fresh uniform spot
+    ``min_dist_between_entities`` clear of the agents and the other targets;
+    without, far outside the arena, for good.
+Episode termination
+    Without ``targets_respawn``: when every target has been covered. With
+    it, never (set ``max_steps``).
+Info (per agent)
+    ``covering_reward`` (the covering term of its reward), ``collision_rew``
+    and ``targets_covered`` (how many targets were covered this step, per env).
+Kwargs
+    ``n_agents`` (5), ``n_targets`` (7), ``x_semidim`` (1), ``y_semidim`` (1),
+    ``min_dist_between_entities`` (0.2), ``lidar_range`` (0.35),
+    ``covering_range`` (0.25), ``use_agent_lidar`` (False),
+    ``n_lidar_rays_entities`` (15), ``n_lidar_rays_agents`` (12),
+    ``agents_per_target`` (2), ``targets_respawn`` (True), ``shared_reward``
+    (False), ``agent_collision_penalty`` (0), ``covering_rew_coeff`` (1.0),
+    ``time_penalty`` (0).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import torch
+from torch import Tensor
+
+from vmas_ros.scenarios.flocking import (
+    env_rows,
+    for_setter,
+    pairwise_distances,
+    sample_clear_positions,
+)
+from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
+from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.sensors import Lidar
+from vmas_ros.simulator.utils import Color, ScenarioUtils
+
+#: name -> default of every kwarg (the heuristic reads the observation-layout ones too)
+DEFAULTS = {
+    "n_agents": 5, "n_targets": 7, "x_semidim": 1, "y_semidim": 1, "min_dist_between_entities": 0.2,
+    "lidar_range": 0.35, "covering_range": 0.25, "use_agent_lidar": False, "n_lidar_rays_entities": 15,
+    "n_lidar_rays_agents": 12, "agents_per_target": 2, "targets_respawn": True, "shared_reward": False,
+    "agent_collision_penalty": 0, "covering_rew_coeff": 1.0, "time_penalty": 0,
+}
+AGENT_RADIUS = TARGET_RADIUS = 0.05
+COLLISION_DISTANCE = 0.005  # surface gap below which two agents count as colliding
+AGENT_LIDAR_START = 0.05  # the agent lidar's first ray, in radians
+TARGET_COLOR = Color.GREEN
+
+
+def is_target(entity) -> bool:
+    """The target lidar's filter."""
+    return entity.name.startswith("target")
+
+
+def is_agent(entity) -> bool:
+    """The agent lidar's filter."""
+    return entity.name.startswith("agent")
+
+
+#: candidate points drawn per respawning target and env (the first clear one is taken)
+RESPAWN_CANDIDATES = 16
+
+
+class Scenario(BaseScenario):
+    supports_batched_reset = True
+
+    def make_world(self, batch_dim: int, device, **kwargs) -> World:
+        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
+        ScenarioUtils.check_kwargs_consumed(kwargs)
+        _validate(config)
+        for name, value in config.items():
+            setattr(self, name, value)
+        self.viewer_zoom = 1
+
+        world = World(
+            batch_dim, device, x_semidim=self.x_semidim, y_semidim=self.y_semidim,
+            collision_force=500, substeps=2, drag=0.25,
+        )
+        for i in range(self.n_agents):
+            sensors = [Lidar(
+                world, n_rays=self.n_lidar_rays_entities, max_range=self.lidar_range,
+                entity_filter=is_target, render_color=Color.GREEN,
+            )]
+            if self.use_agent_lidar:
+                sensors.append(Lidar(
+                    world, angle_start=AGENT_LIDAR_START, angle_end=2 * math.pi + AGENT_LIDAR_START,
+                    n_rays=self.n_lidar_rays_agents, max_range=self.lidar_range,
+                    entity_filter=is_agent, render_color=Color.BLUE,
+                ))
+            world.add_agent(Agent(name=f"agent_{i}", collide=True, shape=Sphere(radius=AGENT_RADIUS), sensors=sensors))
+        self.targets: list[Landmark] = []
+        for i in range(self.n_targets):
+            target = Landmark(
+                name=f"target_{i}", collide=True, movable=False, shape=Sphere(radius=TARGET_RADIUS),
+                color=TARGET_COLOR,
+            )
+            world.add_landmark(target)
+            self.targets.append(target)
+
+        self._index = {agent.name: i for i, agent in enumerate(world.agents)}
+        self._not_self = ~torch.eye(self.n_agents, dtype=torch.bool, device=device)
+        #: per env and target: covered at some step of this episode (only grows without respawns) [B, T]
+        self.all_time_covered = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
+        #: per env and target: covered at the last reward [B, T]
+        self.covered_targets = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
+        #: per env and agent: the last reward's terms [B, N]; the team's covering reward [B]
+        self.covering_rew = torch.zeros(batch_dim, self.n_agents, device=device)
+        self.collision_rew = torch.zeros(batch_dim, self.n_agents, device=device)
+        self.shared_covering_rew = torch.zeros(batch_dim, device=device)
+        return world
+
+    # ------------------------------------------------------------------- reset
+    def reset_world_at(self, env_index=None) -> None:
+        world = self.world
+        if env_index is None:
+            self.all_time_covered = torch.zeros_like(self.all_time_covered)
+        else:
+            self.all_time_covered[env_index] = False
+        placed = self.targets + world.agents
+        bounds = (-self.x_semidim, self.x_semidim), (-self.y_semidim, self.y_semidim)
+        none_yet = torch.zeros(env_rows(world, env_index), 0, world.dim_p, device=world.device)
+        positions = sample_clear_positions(none_yet, len(placed), self.min_dist_between_entities, *bounds)
+        for k, entity in enumerate(placed):
+            entity.set_pos(for_setter(positions[:, k], env_index), batch_index=env_index)
+
+    # ------------------------------------------------------------------ reward
+    def _stack(self, entities) -> Tensor:
+        return torch.stack([e.state.pos for e in entities], dim=1)
+
+    def _update_rewards(self) -> None:
+        """Every agent's reward terms and the covered targets of this step, in one batched pass."""
+        agents_pos, targets_pos = self._stack(self.world.agents), self._stack(self.targets)
+        dist = torch.linalg.vector_norm(agents_pos.unsqueeze(2) - targets_pos.unsqueeze(1), dim=-1)  # [B, N, T]
+        near = dist < self.covering_range
+        self.covered_targets = near.sum(dim=1) >= self.agents_per_target  # [B, T]
+        self.covering_rew = (near & self.covered_targets.unsqueeze(1)).sum(dim=-1).float() * self.covering_rew_coeff
+        team = self.covering_rew.sum(dim=-1)
+        self.shared_covering_rew = torch.where(team != 0, team / 2, team)  # halved, as in VMAS 1.5
+        gap = pairwise_distances(agents_pos) - 2 * AGENT_RADIUS
+        touching = (gap < COLLISION_DISTANCE) & self._not_self
+        self.collision_rew = touching.sum(dim=-1).float() * self.agent_collision_penalty
+        self._agents_pos = agents_pos
+
+    def _move_covered_targets(self) -> None:
+        """Respawn (or retire) the targets covered this step; runs after every agent's reward."""
+        covered = self.covered_targets
+        if not self.targets_respawn:
+            self.all_time_covered = self.all_time_covered | covered
+        bounds = (-self.x_semidim, self.x_semidim), (-self.y_semidim, self.y_semidim)
+        for i, target in enumerate(self.targets):
+            if self.targets_respawn:
+                others = self._stack([t for t in self.targets if t is not target])
+                occupied = torch.cat([self._agents_pos, others], dim=1)
+                # this runs every step for every env (no host read to skip it), so few candidates:
+                # with the default density all 16 are blocked with probability ~1e-7
+                fresh = sample_clear_positions(
+                    occupied, 1, self.min_dist_between_entities, *bounds, candidates=RESPAWN_CANDIDATES,
+                )[:, 0]
+            else:
+                fresh = self._outside_positions(covered.shape[0])
+            target.set_pos(torch.where(covered[:, i, None], fresh, target.state.pos), batch_index=None)
+
+    def _outside_positions(self, rows: int) -> Tensor:
+        """Far outside the arena, where no lidar or agent reaches: both coordinates in [-1000, -10] x x_semidim."""
+        return torch.empty(rows, self.world.dim_p, device=self.world.device).uniform_(
+            -1000 * self.x_semidim, -10 * self.x_semidim,
+        )
+
+    def reward(self, agent: Agent) -> Tensor:
+        i = self._index[agent.name]
+        if i == 0:
+            self._update_rewards()
+        covering = self.shared_covering_rew if self.shared_reward else self.covering_rew[:, i]
+        rew = self.collision_rew[:, i] + covering + self.time_penalty
+        if i == self.n_agents - 1:
+            self._move_covered_targets()
+        return rew
+
+    # ------------------------------------------------------------- observation
+    def observation(self, agent: Agent) -> Tensor:
+        readings = [sensor.measure() for sensor in agent.sensors]
+        return torch.cat([agent.state.pos, agent.state.vel] + readings, dim=-1)
+
+    def info(self, agent: Agent) -> dict[str, Tensor]:
+        i = self._index[agent.name]
+        return {
+            "covering_reward": self.shared_covering_rew if self.shared_reward else self.covering_rew[:, i],
+            "collision_rew": self.collision_rew[:, i],
+            "targets_covered": self.covered_targets.sum(dim=-1),
+        }
+
+    def done(self) -> Tensor:
+        return self.all_time_covered.all(dim=-1)
+
+    def extra_render(self, env_index: int = 0) -> list:
+        from vmas_ros.simulator import rendering
+
+        geoms = []
+        for target in self.targets:
+            ring = rendering.make_circle(self.covering_range, filled=False)
+            xform = rendering.Transform()
+            xform.set_translation(*target.state.pos[env_index].tolist())
+            ring.add_attr(xform)
+            ring.set_color(*TARGET_COLOR.value)
+            geoms.append(ring)
+        # lines between agents within lidar range of each other (VMAS calls it the comms range)
+        pos = self._stack(self.world.agents)[env_index]
+        close = (pairwise_distances(pos.unsqueeze(0))[0] <= self.lidar_range).triu(diagonal=1)
+        for i, j in close.nonzero().tolist():
+            line = rendering.Line(tuple(pos[i].tolist()), tuple(pos[j].tolist()), width=1)
+            line.set_color(*Color.BLACK.value)
+            geoms.append(line)
+        return geoms
+
+
+def _validate(config: dict) -> None:
+    """Raise ValueError naming the first kwarg whose value cannot work."""
+    for name in ("n_agents", "n_targets", "n_lidar_rays_entities", "n_lidar_rays_agents", "agents_per_target"):
+        if not isinstance(config[name], int) or isinstance(config[name], bool) or config[name] < 1:
+            raise ValueError(f"discovery: {name} must be an int >= 1, got {config[name]!r}")
+    for name in ("x_semidim", "y_semidim", "lidar_range", "covering_range"):
+        if not config[name] > 0:
+            raise ValueError(f"discovery: {name} must be > 0, got {config[name]!r}")
+    if not config["min_dist_between_entities"] >= 0:
+        raise ValueError(
+            f"discovery: min_dist_between_entities must be >= 0, got {config['min_dist_between_entities']!r}"
+        )
+
+
+class HeuristicPolicy(BaseHeuristicPolicy):
+    """Sweep the arena along one shared loop; turn towards the nearest target seen; move on if alone.
+
+    * sweep: with no target in lidar range, follow a closed lawnmower loop
+      (``sweep_loop``): rows ``row_spacing`` apart, alternately left to right
+      and back, then a return lane up the left wall. The agent heads for the
+      loop point ``lookahead`` samples past its nearest one. All agents share
+      the loop, so a target one agent found is soon passed by another, which
+      is what covering (two agents) needs, and the rows bring every spot of
+      the arena within about 0.25 of some agent's path;
+    * target: when a target ray reads less than the range, add a pull of
+      ``target_pull`` towards the shortest ray. It is weaker than the sweep
+      push, so an agent alone at a target lingers beside it, then moves on
+      instead of waiting forever (all agents waiting at different targets
+      would stall the team);
+    * spread (only with ``use_agent_lidar``): with no target in sight, step
+      away from an agent closer than ``spread_range``.
+
+    The observation layout and the loop depend on the scenario's kwargs, so
+    the policy takes them (defaults match the scenario's).
+    """
+
+    row_spacing = 0.5
+    lookahead = 8
+    target_pull = 0.9
+    spread_range = 0.15
+    spread_gain = 1.0
+
+    def __init__(
+        self,
+        continuous_action: bool = True,
+        n_lidar_rays_entities: int = DEFAULTS["n_lidar_rays_entities"],
+        n_lidar_rays_agents: int = DEFAULTS["n_lidar_rays_agents"],
+        use_agent_lidar: bool = DEFAULTS["use_agent_lidar"],
+        lidar_range: float = DEFAULTS["lidar_range"],
+        x_semidim: float = DEFAULTS["x_semidim"],
+        y_semidim: float = DEFAULTS["y_semidim"],
+    ) -> None:
+        super().__init__(continuous_action)
+        rays = {"n_lidar_rays_entities": n_lidar_rays_entities, "n_lidar_rays_agents": n_lidar_rays_agents}
+        for name, value in rays.items():
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"discovery heuristic: {name} must be an int >= 1, got {value!r}")
+        self.n_target_rays, self.n_agent_rays = n_lidar_rays_entities, n_lidar_rays_agents
+        self.use_agent_lidar, self.lidar_range = use_agent_lidar, lidar_range
+        self._target_rays = _ray_directions(n_lidar_rays_entities, 0.0)
+        self._agent_rays = _ray_directions(n_lidar_rays_agents, AGENT_LIDAR_START)
+        self.loop = sweep_loop(x_semidim, y_semidim, self.row_spacing)
+
+    def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
+        width = 4 + self.n_target_rays + self.n_agent_rays * self.use_agent_lidar
+        if observation.shape[-1] != width:
+            raise ValueError(f"discovery heuristic: expected observation width {width}, got {observation.shape[-1]}")
+        if self.loop.device != observation.device:  # move the tables once, not every step
+            self.loop = self.loop.to(observation.device)
+            self._target_rays = self._target_rays.to(observation.device)
+            self._agent_rays = self._agent_rays.to(observation.device)
+        pos, loop = observation[:, :2], self.loop
+        nearest_point = torch.cdist(pos, loop).argmin(dim=-1)
+        action = _unit(loop[(nearest_point + self.lookahead) % len(loop)] - pos)
+        targets = observation[:, 4:4 + self.n_target_rays]
+        nearest, ray = targets.min(dim=-1)
+        seen = (nearest < self.lidar_range - 1e-4).unsqueeze(-1)
+        action = action + self.target_pull * seen * self._target_rays[ray]
+        if self.use_agent_lidar:
+            agents = observation[:, 4 + self.n_target_rays:]
+            closest, agent_ray = agents.min(dim=-1)
+            crowded = (~seen) & (closest < self.spread_range).unsqueeze(-1)
+            action = action - self.spread_gain * crowded * self._agent_rays[agent_ray]
+        return (action * u_range).clamp(-u_range, u_range)
+
+
+def sweep_loop(x_semidim: float, y_semidim: float, row_spacing: float, step: float = 0.02) -> Tensor:
+    """Points [P, 2], ``step`` apart, along a closed lawnmower loop over the arena.
+
+    An even number of rows at most ``row_spacing`` apart runs between
+    ``x = -x_semidim + 0.3`` and ``x = x_semidim - 0.1``, starting at the top
+    left and going right; after the bottom row the loop runs left along it
+    to ``x = -x_semidim + 0.08`` and back up that lane (clear of the row
+    turns) to the start.
+    """
+    n_rows = 2 * max(1, math.ceil(y_semidim / row_spacing))
+    rows = [y_semidim - 2 * y_semidim * (k + 0.5) / n_rows for k in range(n_rows)]
+    left, right, lane = -x_semidim + 0.3, x_semidim - 0.1, -x_semidim + 0.08
+    corners = []
+    for k, y in enumerate(rows):
+        ends = (left, right) if k % 2 == 0 else (right, left)
+        corners += [(ends[0], y), (ends[1], y)]
+    corners += [(lane, rows[-1]), (lane, rows[0]), (left, rows[0])]
+    points = []
+    for start, end in itertools.pairwise(corners):
+        start, end = torch.tensor(start), torch.tensor(end)
+        pieces = max(1, round(float(torch.linalg.vector_norm(end - start)) / step))
+        points.append(start + (end - start) * torch.arange(pieces).unsqueeze(-1) / pieces)
+    return torch.cat(points)
+
+
+def _unit(vectors: Tensor) -> Tensor:
+    return vectors / torch.linalg.vector_norm(vectors, dim=-1, keepdim=True).clamp_min(1e-6)
+
+
+def _ray_directions(n_rays: int, start: float) -> Tensor:
+    """Unit vectors [n_rays, 2] of a full-circle lidar whose first ray is at ``start``."""
+    angles = start + torch.arange(n_rays) * (2 * math.pi / n_rays)
+    return torch.stack([angles.cos(), angles.sin()], dim=-1)
