@@ -189,20 +189,37 @@ class Environment:
         return list(actions)
 
     def _set_actions(self, actions: list) -> None:
-        tensors, lows, highs, names = [], [], [], []
+        tensors, names = [], []
         for agent, action in zip(self.agents, actions):
             size = self.get_agent_action_size(agent)
             action = act.to_action_tensor(action, agent.name, self.num_envs, size, self.device, self.continuous_actions)
             if not self.grad_enabled:
                 action = action.detach()
-            low, high = self._action_bounds(agent)
             tensors.append(action)
-            lows.append(low)
-            highs.append(high)
             names.append(agent.name)
+        if not tensors:  # every agent is scripted
+            return
+        lows, highs = self._stacked_bounds()
         kind = "continuous" if self.continuous_actions else "discrete"
-        if self.clamp_action and self.continuous_actions:
-            # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
+        same_shape = all(t.shape == tensors[0].shape for t in tensors)
+        if same_shape:
+            # one fused check (and one host read) for all agents; the slow per-agent path only names the culprit
+            stacked = torch.stack(tensors).float()
+            if self.clamp_action and self.continuous_actions:
+                # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
+                ok = torch.isfinite(stacked).all()
+                if not bool(ok):
+                    unbounded = [torch.full_like(low, float("inf")) for low in lows]
+                    act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, names, kind)
+                stacked = torch.maximum(torch.minimum(stacked, torch.stack(highs).unsqueeze(1)),
+                                        torch.stack(lows).unsqueeze(1))
+                tensors = list(stacked.unbind(0))
+            else:
+                low, high = torch.stack(lows).unsqueeze(1), torch.stack(highs).unsqueeze(1)
+                ok = (torch.isfinite(stacked) & (stacked >= low) & (stacked <= high)).all()
+                if not bool(ok):
+                    act.check_finite_and_range(tensors, lows, highs, names, kind)
+        elif self.clamp_action and self.continuous_actions:
             unbounded = [torch.full_like(low, float("inf")) for low in lows]
             act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, names, kind)
             tensors = [torch.maximum(torch.minimum(a.float(), high), low) for a, low, high in zip(tensors, lows, highs)]
@@ -210,6 +227,14 @@ class Environment:
             act.check_finite_and_range(tensors, lows, highs, names, kind)
         for agent, action in zip(self.agents, tensors):
             self._apply_action(agent, action)
+
+    def _stacked_bounds(self):
+        """Every agent's inclusive action bounds, computed once per env (they never change)."""
+        cached = getattr(self, "_bounds_cache", None)
+        if cached is None or cached[0] != self.device:
+            bounds = [self._action_bounds(agent) for agent in self.agents]
+            cached = self._bounds_cache = (self.device, [b[0] for b in bounds], [b[1] for b in bounds])
+        return cached[1], cached[2]
 
     def _action_bounds(self, agent):
         """Inclusive [low, high] per action column, as tensors on the env's device."""

@@ -243,8 +243,10 @@ def step(
             vel = vel * (1 - tables.drag)
             ang_vel = ang_vel * (1 - tables.drag)
         new_vel = vel + force / tables.mass * sub_dt
-        new_vel = clamp_norm(new_vel, tables.max_speed)
-        new_vel = torch.maximum(torch.minimum(new_vel, tables.v_range), -tables.v_range)
+        if tables.limits_speed:
+            new_vel = clamp_norm(new_vel, tables.max_speed)
+        if tables.limits_velocity:
+            new_vel = torch.maximum(torch.minimum(new_vel, tables.v_range), -tables.v_range)
         new_pos = pos + new_vel * sub_dt
         if params.x_semidim is not None or params.y_semidim is not None:
             new_pos = _clamp_to_bounds(new_pos, params.x_semidim, params.y_semidim)

@@ -92,6 +92,11 @@ class WorldTables:
     agent_rotatable: Tensor  # [A, 1, 1] bool
     pairs: List[PairTable]
     joints: JointTable | None
+    #: which limits exist at all: a step skips the clamps no entity needs (clamping to inf is the identity)
+    limits_speed: bool = True  # some finite max_speed
+    limits_velocity: bool = True  # some finite v_range
+    limits_force: bool = True  # some agent with finite max_f or f_range
+    limits_torque: bool = True  # some agent with finite max_t or t_range
 
 
 def _value_or(value, default: float) -> float:
@@ -232,4 +237,8 @@ def build_tables(world) -> WorldTables:
         agent_rotatable=_column([bool(a.rotatable) for a in agents], device, torch.bool),
         pairs=build_pairs(world, entities),
         joints=build_joints(world, entities),
+        limits_speed=any(e.max_speed is not None for e in entities),
+        limits_velocity=any(e.v_range is not None for e in entities),
+        limits_force=any(a.max_f is not None or a.f_range is not None for a in agents),
+        limits_torque=any(a.max_t is not None or a.t_range is not None for a in agents),
     )

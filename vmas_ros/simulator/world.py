@@ -262,16 +262,19 @@ class World:
             return torch.zeros_like(state.pos), torch.zeros_like(state.rot)
         agent_force = torch.stack([a.state._force for a in self._agents])
         agent_torque = torch.stack([a.state._torque for a in self._agents])
-        agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
-        agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
-        agent_torque = physics.clamp_norm(agent_torque, tables.agent_max_t)
-        agent_torque = torch.maximum(torch.minimum(agent_torque, tables.agent_t_range), -tables.agent_t_range)
-        # clamped actions are visible to scenarios, as in VMAS
-        for agent, f, t in zip(self._agents, agent_force.unbind(0), agent_torque.unbind(0)):
-            if agent.movable:
-                agent.state._force = f
-            if agent.rotatable:
-                agent.state._torque = t
+        if tables.limits_force:
+            agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
+            agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
+        if tables.limits_torque:
+            agent_torque = physics.clamp_norm(agent_torque, tables.agent_max_t)
+            agent_torque = torch.maximum(torch.minimum(agent_torque, tables.agent_t_range), -tables.agent_t_range)
+        if tables.limits_force or tables.limits_torque:
+            # clamped actions are visible to scenarios, as in VMAS
+            for agent, f, t in zip(self._agents, agent_force.unbind(0), agent_torque.unbind(0)):
+                if agent.movable:
+                    agent.state._force = f
+                if agent.rotatable:
+                    agent.state._torque = t
         agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
         agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
         n_landmarks = tables.n_entities - n_agents
