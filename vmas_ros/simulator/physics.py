@@ -64,17 +64,21 @@ class BodyState:
 
 
 def soft_contact_force(
-    pos_a: Tensor, pos_b: Tensor, dist_min: Tensor, strength: float, margin: float, attractive: bool = False
+    pos_a: Tensor, pos_b: Tensor, dist_min: Tensor, strength: float, margin: float, attractive: bool = False,
+    delta: Optional[Tensor] = None, dist: Optional[Tensor] = None,
 ) -> Tensor:
     """Force on ``a`` (``b`` gets the opposite) from the soft penetration model.
 
     Repulsive: pushes ``a`` away from ``b`` while closer than ``dist_min``.
     Attractive (joints): pulls ``a`` towards ``b`` while farther than ``dist_min``.
+    ``delta`` (``pos_a - pos_b``) and ``dist`` (its norm) may be passed when the caller has them.
     """
     # The operation order below is deliberate: contacts switch on at dist == dist_min,
     # so a 1-ulp difference from upstream can flip a contact. We keep VMAS's rounding.
-    delta = pos_a - pos_b
-    dist = torch.linalg.vector_norm(delta, dim=-1)
+    if delta is None:
+        delta = pos_a - pos_b
+    if dist is None:
+        dist = torch.linalg.vector_norm(delta, dim=-1)
     sign = -1.0 if attractive else 1.0
     penetration = torch.logaddexp(dist.new_zeros(()), (dist_min - dist) * sign / margin) * margin
     force = (sign * strength) * delta / torch.where(dist > 0, dist, 1e-8).unsqueeze(-1) * penetration.unsqueeze(-1)
@@ -102,6 +106,9 @@ def _solid_inner(outside: Tensor, surface: Tensor, centre: Tensor, solid: Tensor
 def pair_forces(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
     """Contact forces and torques [P, B, 2] / [P, B, 1] on both members of each pair.
 
+    The members' positions, their offset and distance are computed once here and
+    shared with the kernel (for two spheres they are the contact geometry).
+
     Broad phase: a pair interacts only while its centres are within the sum of
     the shapes' circumscribed radii. That cut matters in a thin band where a
     line's end or a box's corner is within ``LINE_MIN_DIST`` of another shape.
@@ -112,29 +119,37 @@ def pair_forces(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[
     batch sizes torch's float32 kernels may round one ulp differently). Neither
     mode reads back to the host.
     """
-    forces = _pair_contact(pair, state, params)
-    gap = torch.linalg.vector_norm(state.pos[pair.index_a] - state.pos[pair.index_b], dim=-1)
+    pa, pb = state.pos[pair.index_a], state.pos[pair.index_b]
+    delta = pa - pb
+    gap = torch.linalg.vector_norm(delta, dim=-1)
+    f_a, f_b, t_a, t_b = _pair_contact(pair, state, params, pa, pb, delta, gap)
     near = gap <= pair.params["reach"]
     if params.broad_phase == "batch":
         near = near.any(dim=1, keepdim=True)
     near = near.unsqueeze(-1)
-    return tuple(torch.where(near, value, 0.0) for value in forces)
+    # a sphere's torque (None) is zero by construction and needs no mask
+    zero = None if t_a is not None and t_b is not None else pa.new_zeros(pa.shape[:-1] + (1,))
+    return tuple(zero if value is None else torch.where(near, value, 0.0) for value in (f_a, f_b, t_a, t_b))
 
 
-def _pair_contact(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
-    pa, pb = state.pos[pair.index_a], state.pos[pair.index_b]
-    ra, rb = state.rot[pair.index_a, :, 0], state.rot[pair.index_b, :, 0]
+def _pair_contact(
+    pair: PairTable, state: BodyState, params: StepParams, pa: Tensor, pb: Tensor, delta: Tensor, gap: Tensor,
+) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Forces on a and b and torques on a and b of one kernel; a torque that is zero by
+    construction (about a sphere's centre) is None."""
     p = pair.params
     force = lambda a, b, d: soft_contact_force(a, b, d, params.collision_force, params.contact_margin)  # noqa: E731
-    zero_torque = pa.new_zeros(pa.shape[:-1] + (1,))
     kind = pair.kind
     if kind == ("sphere", "sphere"):
-        f_a = force(pa, pb, p["a_radius"] + p["b_radius"])
-        return f_a, -f_a, zero_torque, zero_torque
+        # the contact points are the centres: reuse the broad phase's offset and distance
+        f_a = soft_contact_force(pa, pb, p["a_radius"] + p["b_radius"], params.collision_force,
+                                 params.contact_margin, delta=delta, dist=gap)
+        return f_a, -f_a, None, None
+    ra, rb = state.rot[pair.index_a, :, 0], state.rot[pair.index_b, :, 0]
     if kind == ("line", "sphere"):
         contact = geo.closest_point_on_segment(pa, ra, p["a_length"], pb)
         f_b = force(pb, contact, p["b_radius"] + LINE_MIN_DIST)
-        return -f_b, f_b, cross(contact - pa, -f_b), zero_torque
+        return -f_b, f_b, cross(contact - pa, -f_b), None
     if kind == ("line", "line"):
         ca, cb = geo.closest_points_segment_segment(pa, ra, p["a_length"], pb, rb, p["b_length"])
         f_a = force(ca, cb, torch.full_like(p["a_length"], LINE_MIN_DIST))
@@ -143,7 +158,7 @@ def _pair_contact(pair: PairTable, state: BodyState, params: StepParams) -> Tupl
         surface = geo.closest_point_on_box_boundary(pa, ra, p["a_length"], p["a_width"], pb)
         anchor, depth = _solid_inner(pb, surface, pa, p["a_solid"])
         f_b = force(pb, anchor, p["b_radius"] + LINE_MIN_DIST + depth)
-        return -f_b, f_b, cross(surface - pa, -f_b), zero_torque
+        return -f_b, f_b, cross(surface - pa, -f_b), None
     if kind == ("box", "line"):
         on_box, on_line = geo.closest_points_box_segment(pa, ra, p["a_length"], p["a_width"], pb, rb, p["b_length"])
         anchor, depth = _solid_inner(on_line, on_box, pa, p["a_solid"])
@@ -237,7 +252,8 @@ def step(
         for pair in tables.pairs:
             f_a, f_b, t_a, t_b = pair_forces(pair, current, params)
             force = scatter_pairs(force, pair.index_ab, f_a, f_b)
-            torque = scatter_pairs(torque, pair.index_ab, t_a, t_b)
+            if t_a is not t_b:  # the same tensor: both zero by construction (two spheres)
+                torque = scatter_pairs(torque, pair.index_ab, t_a, t_b)
 
         if substep == 0:
             vel = vel * (1 - tables.drag)
