@@ -7,7 +7,7 @@ import torch
 
 import vmas_ros
 from vmas_ros import cli
-from vmas_ros.bench.heuristics import _episode_returns, evaluate_scenario, team_of
+from vmas_ros.bench.heuristics import episode_returns, evaluate_scenario, team_of
 from vmas_ros.simulator.core import Agent, Sphere, World
 from vmas_ros.simulator.scenario import BaseScenario
 
@@ -44,7 +44,7 @@ class CountdownScenario(BaseScenario):
 
 def test_returns_stop_at_each_envs_first_done():
     env = vmas_ros.make_env(CountdownScenario(), num_envs=4, seed=0)
-    returns, length, finished = _episode_returns(env, None, max_steps=3, progress=None)
+    returns, length, finished = episode_returns(env, None, max_steps=3)
     # env i is done after i + 1 steps (envs 3 never within 3 steps): rewards counted up to and incl. that step
     assert length.tolist() == [1, 2, 3, 3]
     assert finished.tolist() == [True, True, True, False]

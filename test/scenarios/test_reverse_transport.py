@@ -11,6 +11,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
 from test.simulator.parity import run_lockstep
+from vmas_ros.bench.heuristics import episode_returns
 from vmas_ros.scenarios import reverse_transport
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
@@ -199,15 +200,9 @@ def test_heuristic_pushes_towards_the_goal():
 
 
 def run(env, policy, steps: int):
-    """Mean return per env and which envs finished, from a reset, every agent playing ``policy``."""
-    obs = env.reset()
-    total = torch.zeros(env.num_envs)
-    finished = torch.zeros(env.num_envs, dtype=torch.bool)
-    for _ in range(steps):
-        obs, rews, dones, _ = env.step([policy(o, a.u_range) for o, a in zip(obs, env.agents)])
-        total += torch.where(finished, 0.0, rews[0])
-        finished |= dones
-    return float(total.mean()), finished
+    """Mean (shared) return per env and which envs finished, every agent playing ``policy``."""
+    returns, _, finished = episode_returns(env, policy, steps)
+    return float(returns[0].mean()), finished
 
 
 def test_heuristic_delivers_the_box():
@@ -220,7 +215,7 @@ def test_heuristic_delivers_the_box():
     40 points and a return of 20 above random.
     """
     torch.manual_seed(0)
-    heuristic, random = reverse_transport.HeuristicPolicy().compute_action, RandomPolicy().compute_action
+    heuristic, random = reverse_transport.HeuristicPolicy(), RandomPolicy()
     returns, finished = zip(*(run(make(16, package_mass=3.0), p, 100) for p in (heuristic, random)))
     rates = [float(f.float().mean()) for f in finished]
     assert rates[0] >= 0.75 and rates[0] > rates[1] + 0.4 and returns[0] > returns[1] + 20, (rates, returns)

@@ -11,6 +11,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
 from test.simulator.parity import run_lockstep
+from vmas_ros.bench.heuristics import episode_returns
 from vmas_ros.scenarios import transport
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
@@ -218,15 +219,9 @@ def test_heuristic_goes_round_not_through():
 
 
 def run(env, policy, steps: int):
-    """Mean return per env and which envs finished, from a reset, every agent playing ``policy``."""
-    obs = env.reset()
-    total = torch.zeros(env.num_envs)
-    finished = torch.zeros(env.num_envs, dtype=torch.bool)
-    for _ in range(steps):
-        obs, rews, dones, _ = env.step([policy(o, a.u_range) for o, a in zip(obs, env.agents)])
-        total += torch.where(finished, 0.0, rews[0])
-        finished |= dones
-    return float(total.mean()), finished
+    """Mean (shared) return per env and which envs finished, every agent playing ``policy``."""
+    returns, _, finished = episode_returns(env, policy, steps)
+    return float(returns[0].mean()), finished
 
 
 def test_heuristic_delivers_packages():
@@ -237,7 +232,7 @@ def test_heuristic_delivers_packages():
     progress per env); random play in none (return ~0.1). Require 75%.
     """
     torch.manual_seed(0)
-    heuristic, random = transport.HeuristicPolicy().compute_action, RandomPolicy().compute_action
+    heuristic, random = transport.HeuristicPolicy(), RandomPolicy()
     returns, finished = zip(*(run(make(32, package_mass=5.0), p, 250) for p in (heuristic, random)))
     assert finished[0].float().mean() >= 0.75, finished[0]
     assert finished[1].float().mean() <= 0.1 and returns[0] > returns[1] + 50, (returns, finished[1])
@@ -250,6 +245,6 @@ def test_heuristic_moves_default_packages():
     near the goal finish), random ~0. Require 6.
     """
     torch.manual_seed(0)
-    heuristic, random = transport.HeuristicPolicy().compute_action, RandomPolicy().compute_action
+    heuristic, random = transport.HeuristicPolicy(), RandomPolicy()
     (h_return, _), (r_return, _) = (run(make(16), p, 150) for p in (heuristic, random))
     assert h_return > 6 and abs(r_return) < 2, (h_return, r_return)

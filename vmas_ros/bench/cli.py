@@ -8,6 +8,7 @@ import argparse
 import sys
 
 from vmas_ros.bench.common import BENCHMARKS
+from vmas_ros.bench.report import plot_available
 
 __all__ = ["add_bench_arguments", "run_bench_command"]
 
@@ -82,14 +83,7 @@ def run_bench_command(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"vmas-ros bench: {error}", file=sys.stderr)
         return 2
-    plot = not getattr(args, "no_plot", False)
-    if plot:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            print("note: matplotlib is not installed (pip install 'vmas_ros[bench]'); no PNG will be written",
-                  file=sys.stderr)
-            plot = False
+    plot = plot_available(not getattr(args, "no_plot", False))
     rows = mpe.run_mpe_benchmark(progress=not getattr(args, "no_progress", False), **options)
     paths = mpe.write_results(rows, getattr(args, "out", "bench_results"), plot=plot)
     print(mpe.format_table(rows))

@@ -31,7 +31,7 @@ from typing import Dict, List, Optional, Sequence
 
 import torch
 
-__all__ = ["Evaluation", "evaluate_scenario", "add_evaluate_arguments", "run_evaluate_command", "team_of"]
+__all__ = ["Evaluation", "add_evaluate_arguments", "episode_returns", "evaluate_scenario", "run_evaluate_command", "team_of"]
 
 _TEAM_SUFFIX = re.compile(r"[ _]\d+$")
 
@@ -56,8 +56,13 @@ class Evaluation:
     seconds: float = 0.0
 
 
-def _episode_returns(env, policy, max_steps: int, progress) -> tuple:
-    """Per-agent returns [A, B] and per-env episode lengths [B] of one batched rollout."""
+def episode_returns(env, policy, max_steps: int, progress=None) -> tuple:
+    """One batched episode from ``env.reset()``: per-agent returns [A, B], per-env lengths [B]
+    and which envs finished [B].
+
+    Every agent plays ``policy.compute_action`` (uniform random actions when ``policy`` is
+    None); an env's rewards count up to and including its first done step.
+    """
     obs = env.reset()
     returns = torch.zeros(env.n_agents, env.num_envs, device=env.device)
     running = torch.ones(env.num_envs, dtype=torch.bool, device=env.device)
@@ -90,7 +95,7 @@ def evaluate_scenario(
         env = vmas_ros.make_env(name, num_envs=num_envs, device=device, seed=seed, **kwargs)
         policy = make_heuristic(name, **kwargs) if label == "heuristic" else None
         start = time.perf_counter()
-        returns, length, finished = _episode_returns(env, policy, max_steps, progress)
+        returns, length, finished = episode_returns(env, policy, max_steps, progress)
         teams: Dict[str, List[int]] = {}
         for i, agent in enumerate(env.agents):
             teams.setdefault(team_of(agent.name), []).append(i)

@@ -10,6 +10,7 @@ import json
 import os
 import platform
 import statistics
+import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -18,7 +19,7 @@ import torch
 
 from vmas_ros.bench.common import _LABEL, CSV_COLUMNS, PEERS, SCENARIO, SIDES
 
-__all__ = ["compute_ratios", "format_table", "machine_info", "write_results"]
+__all__ = ["compute_ratios", "format_table", "machine_info", "plot_available", "write_csv", "write_results"]
 
 
 # ------------------------------------------------------------------- ratios
@@ -240,6 +241,28 @@ def _csv_value(value):
     return value
 
 
+def plot_available(wanted: bool) -> bool:
+    """Whether a benchmark should write PNGs: ``wanted`` and matplotlib importable (else a note on stderr)."""
+    if not wanted:
+        return False
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        print("note: matplotlib is not installed (pip install 'vmas_ros[bench]'); no PNG will be written",
+              file=sys.stderr)
+        return False
+    return True
+
+
+def write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str]) -> None:
+    """One CSV line per row, only ``columns`` (lists joined, floats kept exact)."""
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(columns), extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: _csv_value(row.get(k)) for k in columns})
+
+
 def write_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str, Path]:
     """Write ``mpe_benchmark.csv``, ``.json`` (rows, ratios, machine info), ``.md`` (the
     table) and, with ``plot``, ``.png`` (paper Fig. 2 style; needs matplotlib) into
@@ -252,11 +275,7 @@ def write_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str,
     info = machine_info(rows)
     ratios = compute_ratios(rows)
     paths = {"csv": out / "mpe_benchmark.csv", "json": out / "mpe_benchmark.json", "md": out / "mpe_benchmark.md"}
-    with open(paths["csv"], "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=CSV_COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: _csv_value(row.get(k)) for k in CSV_COLUMNS})
+    write_csv(paths["csv"], rows, CSV_COLUMNS)
     notes = [
         "Timed: the steps calls of step() only; env construction, the reset before each repeat and the random "
         "actions (generated once beforehand) are not timed.",

@@ -46,7 +46,12 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence
 import torch
 
 from vmas_ros.bench import mpe as _mpe
-from vmas_ros.bench.suite_report import format_suite_table, summarize, write_suite_results
+from vmas_ros.bench.report import plot_available
+from vmas_ros.bench.suite_report import (
+    format_suite_table,
+    summarize,
+    write_suite_results,
+)
 from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
 
 __all__ = ["WORKLOADS", "Workload", "plan_suite", "run_suite", "run_suite_command", "validate_suite_options"]
@@ -443,14 +448,7 @@ def run_suite_command(args) -> int:
     except ValueError as error:
         print(f"vmas-ros bench suite: {error}", file=sys.stderr)
         return 2
-    plot = not getattr(args, "no_plot", False)
-    if plot:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            print("note: matplotlib is not installed (pip install 'vmas_ros[bench]'); no PNG will be written",
-                  file=sys.stderr)
-            plot = False
+    plot = plot_available(not getattr(args, "no_plot", False))
     rows = run_suite(progress=not getattr(args, "no_progress", False), **options)
     paths = write_suite_results(rows, getattr(args, "out", "bench_results"), plot=plot)
     print(format_suite_table(summarize(rows)))

@@ -7,13 +7,12 @@ Ratios are always ratios of the medians of one run, never of different runs.
 """
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 from vmas_ros.bench.common import _LABEL
-from vmas_ros.bench.report import _csv_value, machine_info
+from vmas_ros.bench.report import machine_info, write_csv
 
 __all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "summarize",
            "write_suite_results"]
@@ -257,11 +256,7 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
     info = machine_info(rows)
     summary = summarize(rows)
     paths = {"csv": out / "suite.csv", "json": out / "suite.json", "md": out / "suite.md"}
-    with open(paths["csv"], "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=SUITE_COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: _csv_value(row.get(k)) for k in SUITE_COLUMNS})
+    write_csv(paths["csv"], rows, SUITE_COLUMNS)
     notes = [
         "Timed: steps calls of env.step (World.step for spheres_100 and scaling_agents); building, the reset "
         "before each repeat and the random actions (one seeded generator, shared by both sides) are not.",

@@ -39,10 +39,11 @@ import math
 
 import torch
 
+from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 AGENT_RADIUS = 0.03
 AGENT_U_MULTIPLIER = 0.7
@@ -83,8 +84,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
         validate(config)
         self.n_agents = config["n_agents"]
         self.package_mass = float(config["package_mass"])
@@ -244,10 +244,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         super().__init__(continuous_action)
         if not continuous_action:
             raise ValueError("balance heuristic: only continuous actions are supported")
-        unknown = set(scenario_kwargs) - set(DEFAULTS)
-        if unknown:
-            raise TypeError(f"balance HeuristicPolicy got unknown kwargs {sorted(unknown)}")
-        config = {**DEFAULTS, **scenario_kwargs}
+        config = heuristic_kwargs("balance", DEFAULTS, scenario_kwargs)
         validate(config)
         self.n_agents = config["n_agents"]
         self.package_mass = float(config["package_mass"])

@@ -1,5 +1,11 @@
-"""Reset-time helpers every scenario shares: how many envs a reset selects, and
-values drawn for them shaped the way ``Entity.set_*(..., batch_index=...)`` takes them.
+"""Helpers every scenario shares.
+
+Kwargs: :func:`read_kwargs` (a scenario's kwargs with their defaults; unknown
+ones warn, as in VMAS) and :func:`heuristic_kwargs` (the same kwargs handed to
+a heuristic, where an unknown one is a mistake and raises).
+
+Resets: how many envs a reset selects, and values drawn for them shaped the
+way ``Entity.set_*(..., batch_index=...)`` takes them.
 
 VMAS's reset selector ``env_index`` is None (every env), an int (one env) or,
 for scenarios with ``supports_batched_reset``, a 1-D tensor of env indices.
@@ -8,12 +14,35 @@ scenario draws ``[rows, D]`` once and passes it through :func:`for_index`.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator.utils import selected_env_count
+from vmas_ros.simulator.utils import ScenarioUtils, selected_env_count
 
-__all__ = ["for_index", "selected_rows", "uniform_rows"]
+__all__ = ["for_index", "heuristic_kwargs", "read_kwargs", "selected_rows", "uniform_rows"]
+
+
+def read_kwargs(kwargs: dict, defaults: Mapping[str, Any]) -> dict:
+    """Pop every kwarg ``defaults`` names from ``kwargs`` (its default when absent) and warn
+    about whatever is left, as VMAS does for kwargs a scenario does not use."""
+    config = {name: kwargs.pop(name, default) for name, default in defaults.items()}
+    ScenarioUtils.check_kwargs_consumed(kwargs)
+    return config
+
+
+def heuristic_kwargs(scenario: str, defaults: Mapping[str, Any], scenario_kwargs: Mapping[str, Any]) -> dict:
+    """The scenario kwargs a heuristic was given, completed with ``defaults``.
+
+    Unlike the scenario, a heuristic refuses kwargs it does not know (TypeError):
+    it would otherwise parse observations with the wrong layout, silently.
+    """
+    unknown = set(scenario_kwargs) - set(defaults)
+    if unknown:
+        raise TypeError(f"{scenario} HeuristicPolicy got unknown kwargs {sorted(unknown)}")
+    return {**defaults, **scenario_kwargs}
 
 
 def selected_rows(batch_dim: int, env_index) -> int:

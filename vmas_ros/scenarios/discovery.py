@@ -49,6 +49,7 @@ import math
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.scenarios.flocking import (
     env_rows,
     for_setter,
@@ -59,7 +60,7 @@ from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 #: name -> default of every kwarg (the heuristic reads the observation-layout ones too)
 DEFAULTS = {
@@ -92,8 +93,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
         _validate(config)
         for name, value in config.items():
             setattr(self, name, value)

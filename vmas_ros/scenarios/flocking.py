@@ -38,11 +38,12 @@ import math
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 #: name -> default of every kwarg
 DEFAULTS = {
@@ -112,8 +113,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
         for name in ("n_agents", "n_lidar_rays"):
             if not isinstance(config[name], int) or config[name] < 1:
                 raise ValueError(f"flocking: {name} must be an int >= 1, got {config[name]!r}")

@@ -50,6 +50,7 @@ import math
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.scenarios.football_ai import HeuristicPolicy, PitchSpec, TeamAI
 from vmas_ros.scenarios.football_field import (
     BLUE_COLOR,
@@ -64,7 +65,7 @@ from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.dynamics.holonomic import Holonomic
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils, TorchUtils, as_index_tensor
+from vmas_ros.simulator.utils import Color, TorchUtils, as_index_tensor
 
 __all__ = ["HeuristicPolicy", "Scenario"]
 
@@ -96,10 +97,9 @@ class Scenario(BaseScenario):
 
     # ------------------------------------------------------------------ build
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        cfg = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
         if kwargs.pop("dense_reward_ratio", None) is not None:
             raise ValueError("football: dense_reward_ratio is deprecated, use dense_reward (a bool) instead")
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        cfg = read_kwargs(kwargs, DEFAULTS)
         self._validate(cfg)
         self.cfg = cfg
         for name, value in cfg.items():

@@ -46,6 +46,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import heuristic_kwargs
 from vmas_ros.scenarios.football_field import DEFAULTS
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 
@@ -360,9 +361,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, team: str = "blue", **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        unknown = set(scenario_kwargs) - set(DEFAULTS)
-        if unknown:
-            raise TypeError(f"football HeuristicPolicy got unknown kwargs {sorted(unknown)}")
+        heuristic_kwargs("football", DEFAULTS, scenario_kwargs)  # refuses unknown kwargs
         if team not in ("blue", "red"):
             raise ValueError(f"football HeuristicPolicy: team must be 'blue' or 'red', got {team!r}")
         cfg = {**DEFAULTS, **scenario_kwargs}

@@ -49,13 +49,13 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import selected_rows
+from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import LINE_MIN_DIST, Color, ScenarioUtils, TorchUtils
+from vmas_ros.simulator.utils import LINE_MIN_DIST, Color, TorchUtils
 
 #: name -> default of every kwarg (the heuristic reads the ones it needs too)
 DEFAULTS = {
@@ -117,8 +117,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
         for name in ("v_range", "a_range"):
             if not config[name] > 0:
                 raise ValueError(f"give_way: {name} must be > 0, got {config[name]!r}")
@@ -348,10 +347,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        unknown = set(scenario_kwargs) - set(DEFAULTS)
-        if unknown:
-            raise TypeError(f"give_way HeuristicPolicy got unknown kwargs {sorted(unknown)}")
-        cfg = {**DEFAULTS, **scenario_kwargs}
+        cfg = heuristic_kwargs("give_way", DEFAULTS, scenario_kwargs)
         self.v_range = cfg["v_range"]
         self.velocity_actions = cfg["use_velocity_controller"]
         self.width = 6 if cfg["observe_rel_pos"] else 4

@@ -38,7 +38,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import selected_rows
+from vmas_ros.scenarios.common import heuristic_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -229,9 +229,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, n_passages: int = DEFAULTS["n_passages"], **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        unknown = set(scenario_kwargs) - set(DEFAULTS)
-        if unknown:
-            raise TypeError(f"passage HeuristicPolicy got unknown kwargs {sorted(unknown)}")
+        heuristic_kwargs("passage", DEFAULTS, scenario_kwargs)  # refuses unknown kwargs
         if not isinstance(n_passages, int) or not 1 <= n_passages <= N_BLOCKS:
             raise ValueError(f"passage heuristic: n_passages must be an int in [1, {N_BLOCKS}], got {n_passages!r}")
         self.n_passages = n_passages

@@ -35,11 +35,11 @@ import math
 import torch
 
 from vmas_ros.scenarios import packages as pk
-from vmas_ros.scenarios.common import selected_rows
+from vmas_ros.scenarios.common import read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 AGENT_RADIUS = 0.03
 AGENT_U_MULTIPLIER = 0.6
@@ -59,8 +59,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        options = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        options = read_kwargs(kwargs, DEFAULTS)
         self.n_agents = pk.check_count(NAME, "n_agents", options["n_agents"])
         self.n_packages = pk.check_count(NAME, "n_packages", options["n_packages"])
         self.package_width = pk.check_positive(NAME, "package_width", options["package_width"])

@@ -32,11 +32,12 @@ import math
 
 import torch
 
+from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
 from vmas_ros.scenarios.common import uniform_rows as uniform_for
 from vmas_ros.simulator.core import Agent, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import DRAG, LINE_MIN_DIST, Color, ScenarioUtils
+from vmas_ros.simulator.utils import DRAG, LINE_MIN_DIST, Color
 
 AGENT_RADIUS = 0.03
 AGENT_U_MULTIPLIER = 0.6
@@ -62,8 +63,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
         validate(config)
         self.n_agents = config["n_agents"]
         self.line_length = float(config["line_length"])
@@ -155,10 +155,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         super().__init__(continuous_action)
         if not continuous_action:
             raise ValueError("wheel heuristic: only continuous actions are supported")
-        unknown = set(scenario_kwargs) - set(DEFAULTS)
-        if unknown:
-            raise TypeError(f"wheel HeuristicPolicy got unknown kwargs {sorted(unknown)}")
-        config = {**DEFAULTS, **scenario_kwargs}
+        config = heuristic_kwargs("wheel", DEFAULTS, scenario_kwargs)
         validate(config)
         self.n_agents = config["n_agents"]
         self.half = config["line_length"] / 2

@@ -36,10 +36,11 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 GOOD_RADIUS, ADVERSARY_RADIUS, OBSTACLE_RADIUS = 0.05, 0.075, 0.2
 CATCH_REWARD = 10.0
@@ -72,8 +73,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
         for name in ("num_good_agents", "num_adversaries"):
             if not isinstance(config[name], int) or config[name] < 1:
                 raise ValueError(f"simple_tag: {name} must be an int >= 1, got {config[name]!r}")

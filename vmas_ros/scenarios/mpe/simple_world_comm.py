@@ -35,10 +35,10 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import ScenarioUtils
 
 DIM_C = 4
 DEFAULTS = dict(num_good_agents=2, num_adversaries=4, num_landmarks=1, num_food=2, num_forests=2)
@@ -79,8 +79,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        layout = {name: kwargs.pop(name, default) for name, default in DEFAULTS.items()}
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        layout = read_kwargs(kwargs, DEFAULTS)
         _check_layout(layout)
         world = World(batch_dim=batch_dim, device=device, x_semidim=1, y_semidim=1, dim_c=DIM_C)
         for i in range(layout["num_adversaries"]):
