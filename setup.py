@@ -35,7 +35,10 @@ setup(
         ],
         "foxglove": ["foxglove-sdk>=0.30"],
         "record": ["mcap", "mcap-ros2-support"],
-        "train": ["torchrl", "onnx", "onnxruntime", "matplotlib"],
+        # torchrl 0.14 is the release that matches torch 2.13 (a newer one would pull a newer torch)
+        "train": ["torchrl>=0.14,<0.15", "tensordict>=0.14,<0.15", "onnx", "onnxscript", "onnxruntime",
+                  "pettingzoo>=1.24", "matplotlib"],
+        "rllib": ["ray[rllib]"],
         "play": ["pygame"],
         "bench": ["matplotlib"],
         "test": [
