@@ -11,18 +11,25 @@ Each kernel returns the distance along the ray to the first hit, or
 clamped (as in VMAS); the sensor clamps by taking a min with ``max_range``.
 Misses are decided with masks and guarded denominators, so no NaN reaches the
 result.
+
+The work is done by the ``*_xy`` kernels, which take x and y components as
+separate tensors (structure of arrays): the Lidar lays rays out as
+``[E, B, R]`` (targets, envs, rays) so that each op runs over one contiguous
+block and the nearest hit is a reduction over the leading dim. ``[..., 2]``
+vectors made every op stride over pairs of floats and every dot product a slow
+reduction over a trailing dim of two. The ``[..., 2]`` functions are thin
+adapters over them.
 """
 from __future__ import annotations
 
 import math
-from typing import Union
+from typing import Tuple, Union
 
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator.geometry import cross2, rotate
 
-__all__ = ["ray_sphere", "ray_box", "ray_segment"]
+__all__ = ["ray_sphere", "ray_box", "ray_segment", "ray_sphere_xy", "ray_box_xy", "ray_segment_xy"]
 
 Scalar = Union[Tensor, float]
 
@@ -30,11 +37,6 @@ Scalar = Union[Tensor, float]
 def _as_tensor(x: Scalar, like: Tensor) -> Tensor:
     """Turn a python number (or tensor) into a tensor on ``like``'s device/dtype."""
     return torch.as_tensor(x, dtype=like.dtype, device=like.device)
-
-
-def _direction(angle: Tensor) -> Tensor:
-    """Unit ray direction ``[..., 2]``."""
-    return torch.stack([torch.cos(angle), torch.sin(angle)], dim=-1)
 
 
 def ray_sphere(
@@ -50,16 +52,25 @@ def ray_sphere(
     lies behind the origin), while an origin inside with the centre behind is a
     miss; both quirks are kept for parity with VMAS.
     """
-    angle, radius = _as_tensor(angle, origin), _as_tensor(radius, origin)
-    max_range = _as_tensor(max_range, origin)
-    s = _direction(angle)
-    to_center = center - origin
-    along = (to_center * s).sum(-1)  # signed distance to the foot of the perpendicular
-    foot = origin + along[..., None] * s
-    offset = torch.linalg.vector_norm(center - foot, dim=-1)
-    hit = (offset < radius) & (along > 0)
-    half_chord_sq = radius**2 - offset**2
-    half_chord = torch.sqrt(torch.where(hit, half_chord_sq, torch.ones_like(half_chord_sq)))
+    angle = _as_tensor(angle, origin)
+    return ray_sphere_xy(
+        origin[..., 0], origin[..., 1], torch.cos(angle), torch.sin(angle),
+        center[..., 0], center[..., 1], _as_tensor(radius, origin), _as_tensor(max_range, origin),
+    )
+
+
+def ray_sphere_xy(
+    ox: Tensor, oy: Tensor, cos_a: Tensor, sin_a: Tensor, cx: Tensor, cy: Tensor, radius: Scalar, max_range: Scalar,
+) -> Tensor:
+    """:func:`ray_sphere` on separate x/y components (origin, ray direction, centre); all broadcast."""
+    to_cx, to_cy = cx - ox, cy - oy
+    along = to_cx * cos_a + to_cy * sin_a  # signed distance to the foot of the perpendicular
+    # centre minus foot, squared: compared with radius^2 instead of taking a root
+    off_x, off_y = to_cx - along * cos_a, to_cy - along * sin_a
+    offset_sq = off_x * off_x + off_y * off_y
+    radius_sq = radius * radius
+    hit = (offset_sq < radius_sq) & (along > 0)
+    half_chord = torch.sqrt(torch.where(hit, radius_sq - offset_sq, 1.0))
     return torch.where(hit, along - half_chord, max_range)
 
 
@@ -86,25 +97,38 @@ def ray_box(
     equals VMAS's ``+-inf`` / NaN division outcome, without producing NaN.
     """
     angle, rot = _as_tensor(angle, origin), _as_tensor(rot, origin)
-    length, width = _as_tensor(length, origin), _as_tensor(width, origin)
-    max_range = _as_tensor(max_range, origin)
+    return ray_box_xy(
+        origin[..., 0], origin[..., 1], torch.cos(angle), torch.sin(angle), center[..., 0], center[..., 1],
+        torch.cos(rot), torch.sin(rot), _as_tensor(length, origin), _as_tensor(width, origin),
+        _as_tensor(max_range, origin),
+    )
 
-    local_origin = rotate(origin - center, -rot)
-    local_dir = rotate(_direction(angle), -rot)
-    half = torch.stack(torch.broadcast_tensors(length / 2, width / 2), dim=-1)
 
+def _slab(local_origin: Tensor, local_dir: Tensor, half: Tensor) -> Tuple[Tensor, Tensor]:
+    """Entry and exit parameters ``(lo, hi)`` of a ray in the slab ``|x| <= half`` along one axis."""
     flat = local_dir == 0
-    dir_safe = torch.where(flat, torch.ones_like(local_dir), local_dir)
+    dir_safe = torch.where(flat, 1.0, local_dir)
     t_a = (-half - local_origin) / dir_safe
     t_b = (half - local_origin) / dir_safe
-    lo, hi = torch.minimum(t_a, t_b), torch.maximum(t_a, t_b)
     inside = local_origin.abs() < half
-    inf = torch.full_like(lo, math.inf)
-    lo = torch.where(flat, torch.where(inside, -inf, inf), lo)
-    hi = torch.where(flat, torch.where(inside, inf, -inf), hi)
+    unbounded = torch.where(inside, -math.inf, math.inf)
+    lo = torch.where(flat, unbounded, torch.minimum(t_a, t_b))
+    hi = torch.where(flat, -unbounded, torch.maximum(t_a, t_b))
+    return lo, hi
 
-    t_near = lo.amax(dim=-1)
-    t_far = hi.amin(dim=-1)
+
+def ray_box_xy(
+    ox: Tensor, oy: Tensor, cos_a: Tensor, sin_a: Tensor, cx: Tensor, cy: Tensor,
+    cos_rot: Tensor, sin_rot: Tensor, length: Scalar, width: Scalar, max_range: Scalar,
+) -> Tensor:
+    """:func:`ray_box` on separate x/y components; the box's heading comes as its cosine and sine."""
+    rel_x, rel_y = ox - cx, oy - cy
+    # into the box frame: rotation by -rot
+    local_ox, local_oy = rel_x * cos_rot + rel_y * sin_rot, rel_y * cos_rot - rel_x * sin_rot
+    local_dx, local_dy = cos_a * cos_rot + sin_a * sin_rot, sin_a * cos_rot - cos_a * sin_rot
+    lo_x, hi_x = _slab(local_ox, local_dx, length / 2)
+    lo_y, hi_y = _slab(local_oy, local_dy, width / 2)
+    t_near, t_far = torch.maximum(lo_x, lo_y), torch.minimum(hi_x, hi_y)
     hit = (t_far >= t_near) & (t_near > 0)
     return torch.where(hit, t_near, max_range)
 
@@ -124,14 +148,23 @@ def ray_segment(
     distance is ``u``. A ray parallel to the segment (also collinear) misses.
     """
     angle, rot = _as_tensor(angle, origin), _as_tensor(rot, origin)
-    length, max_range = _as_tensor(length, origin), _as_tensor(max_range, origin)
-    s = _direction(angle)
-    r = _direction(rot) * length[..., None]
-    w = origin - center
-    rxs = cross2(r, s)
+    return ray_segment_xy(
+        origin[..., 0], origin[..., 1], torch.cos(angle), torch.sin(angle), center[..., 0], center[..., 1],
+        torch.cos(rot), torch.sin(rot), _as_tensor(length, origin), _as_tensor(max_range, origin),
+    )
+
+
+def ray_segment_xy(
+    ox: Tensor, oy: Tensor, cos_a: Tensor, sin_a: Tensor, cx: Tensor, cy: Tensor,
+    cos_rot: Tensor, sin_rot: Tensor, length: Scalar, max_range: Scalar,
+) -> Tensor:
+    """:func:`ray_segment` on separate x/y components; the segment's heading as its cosine and sine."""
+    r_x, r_y = cos_rot * length, sin_rot * length
+    w_x, w_y = ox - cx, oy - cy
+    rxs = r_x * sin_a - r_y * cos_a
     parallel = rxs == 0
-    rxs_safe = torch.where(parallel, torch.ones_like(rxs), rxs)
-    t = cross2(w, s) / rxs_safe  # position on the segment, in units of its length
-    u = cross2(w, r) / rxs_safe  # distance along the ray
+    rxs_safe = torch.where(parallel, 1.0, rxs)
+    t = (w_x * sin_a - w_y * cos_a) / rxs_safe  # position on the segment, in units of its length
+    u = (w_x * r_y - w_y * r_x) / rxs_safe  # distance along the ray
     hit = ~parallel & (t >= -0.5) & (t <= 0.5) & (u >= 0)
     return torch.where(hit, u, max_range)

@@ -371,24 +371,29 @@ class World:
         for e in targets:
             if not (e.collides(entity) and entity.collides(e)):
                 raise ValueError(f"rays are cast only among collidable entities: {entity.name!r} and {e.name!r} do not collide")
-        origin = entity.state.pos[:, None, None, :]  # [B, 1, 1, 2]
-        ray_angles = angles.unsqueeze(-1)  # [B, R, 1]
-        dists = [torch.full_like(angles, float(max_range))]
+        # rays [1, B, R] against targets [E, B, 1]: every op runs over contiguous [B, R] blocks
+        # and the nearest hit is a reduction over the leading dim
+        origin = entity.state.pos
+        ox, oy = origin[:, 0].view(1, -1, 1), origin[:, 1].view(1, -1, 1)
+        cos_a, sin_a = torch.cos(angles).unsqueeze(0), torch.sin(angles).unsqueeze(0)
+        nearest = torch.full_like(angles, float(max_range))
         for kind in ("box", "sphere", "line"):
             group = [e for e in targets if e.shape.kind == kind]
             if not group:
                 continue
-            pos = torch.stack([e.state.pos for e in group], dim=1).unsqueeze(1)  # [B, 1, E, 2]
-            rot = torch.stack([e.state.rot[..., 0] for e in group], dim=1).unsqueeze(1)  # [B, 1, E]
-            if kind == "box":
-                length = torch.tensor([e.shape.length for e in group], device=self._device)
-                width = torch.tensor([e.shape.width for e in group], device=self._device)
-                d = raycast.ray_box(origin, ray_angles, pos, rot, length, width, max_range)
-            elif kind == "sphere":
-                radius = torch.tensor([e.shape.radius for e in group], device=self._device)
-                d = raycast.ray_sphere(origin, ray_angles, pos, radius, max_range)
+            pos = torch.stack([e.state.pos for e in group])  # [E, B, 2]
+            cx, cy = pos[..., 0:1], pos[..., 1:2]
+            if kind == "sphere":
+                radius = torch.tensor([e.shape.radius for e in group], device=self._device).view(-1, 1, 1)
+                d = raycast.ray_sphere_xy(ox, oy, cos_a, sin_a, cx, cy, radius, max_range)
             else:
-                length = torch.tensor([e.shape.length for e in group], device=self._device)
-                d = raycast.ray_segment(origin, ray_angles, pos, rot, length, max_range)
-            dists.append(d.amin(dim=-1))
-        return torch.stack(dists, dim=-1).amin(dim=-1)
+                rot = torch.stack([e.state.rot for e in group])  # [E, B, 1]
+                cos_r, sin_r = torch.cos(rot), torch.sin(rot)
+                length = torch.tensor([e.shape.length for e in group], device=self._device).view(-1, 1, 1)
+                if kind == "box":
+                    width = torch.tensor([e.shape.width for e in group], device=self._device).view(-1, 1, 1)
+                    d = raycast.ray_box_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, width, max_range)
+                else:
+                    d = raycast.ray_segment_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, max_range)
+            nearest = torch.minimum(nearest, d.amin(dim=0))
+        return nearest
