@@ -51,6 +51,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
                        help="suite: sphere counts of scaling_agents (default: 10 30 100 300 1000)")
     suite.add_argument("--max-peer-agents", type=int, default=None, metavar="N",
                        help="suite: run VMAS in scaling_agents only up to N agents; above, omitted (default 100)")
+    suite.add_argument("--compile-physics", action="store_true",
+                       help="suite: run vmas_ros's physics step through torch.compile (World.compile_physics); "
+                            "compiled during the warm-up runs; memory_30k stays eager")
     return parser
 
 

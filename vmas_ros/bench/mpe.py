@@ -139,16 +139,17 @@ def _validate(num_envs, steps, repeats, devices, peers, mpe_max_envs, threads, w
 
 
 # -------------------------------------------------------------------- sides
-def _vmas_case(side: str, num_envs: int, device: str, steps: int) -> Case:
+def _vmas_case(side: str, num_envs: int, device: str, steps: int, compile_physics: bool = False) -> Case:
     if side == "vmas_ros":
         import vmas_ros
 
         make = vmas_ros.make_env
+        extra = {"compile_physics": True} if compile_physics else {}
     else:
         import vmas
 
-        make = vmas.make_env
-    env = make(SCENARIO, num_envs=num_envs, device=device, seed=0)
+        make, extra = vmas.make_env, {}
+    env = make(SCENARIO, num_envs=num_envs, device=device, seed=0, **extra)
     env.reset()
     actions = [env.get_random_actions() for _ in range(steps)]  # generated once, not timed
 

@@ -190,9 +190,10 @@ def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, pe
 
 
 # ------------------------------------------------------------------- cases
-def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int):
+def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int, compile_physics: bool = False):
     make = importlib.import_module("vmas_ros" if side == SIDE else "vmas").make_env
-    return make(scenario, num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed, **dict(kwargs))
+    extra = {"compile_physics": True} if compile_physics and side == SIDE else {}
+    return make(scenario, num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed, **dict(kwargs), **extra)
 
 
 def _action_bounds(env) -> List[tuple]:
@@ -206,10 +207,10 @@ def _random_actions(bounds, num_envs: int, steps: int, seed: int) -> List[List[t
             for _ in range(steps)]
 
 
-def _env_cases(unit: Unit, steps: int, seed: int) -> Dict[str, Case]:
+def _env_cases(unit: Unit, steps: int, seed: int, compile_physics: bool = False) -> Dict[str, Case]:
     """One env per side, the same actions for both (drawn in vmas_ros's action space)."""
     w = unit.workload
-    envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed) for side in unit.sides}
+    envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed, compile_physics) for side in unit.sides}
     first = envs[unit.sides[0]]
     unit.n_agents = first.n_agents
     dims = {side: [int(low.numel()) for low, _ in _action_bounds(env)] for side, env in envs.items()}
@@ -228,10 +229,13 @@ def _env_cases(unit: Unit, steps: int, seed: int) -> Dict[str, Case]:
     return cases
 
 
-def _spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int) -> Case:
+def _spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int,
+                  compile_physics: bool = False) -> Case:
     """``n_agents`` overlapping spheres built with the side's own World/Agent/Sphere; times World.step."""
     core = importlib.import_module("vmas_ros.simulator.core" if side == SIDE else "vmas.simulator.core")
     world = core.World(batch_dim=num_envs, device="cpu")
+    if compile_physics and side == SIDE:
+        world.compile_physics()
     for i in range(n_agents):
         world.add_agent(core.Agent(name=f"sphere_{i}", shape=core.Sphere(radius=SPHERE_RADIUS)))
     world.reset(None)
@@ -347,23 +351,26 @@ def _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run) -
 
 # ------------------------------------------------------------------ runner
 def _measure(unit: Unit, run_id: str, steps: int, repeats: int, warmup: int, threads: int, mpe_max_envs,
-             seed: int, on_run: Callable) -> List[dict]:
+             seed: int, on_run: Callable, compile_physics: bool = False) -> List[dict]:
     w, loadavg = unit.workload, _mpe._loadavg()
     if w.kind == "memory":  # no warm-up: each run is a fresh process, as a user's first run would be
         return _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run)
     measured = {side: unit.num_envs for side in unit.sides}
     if w.kind == "mpe":
-        cases = {SIDE: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps)}
+        cases = {SIDE: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps, compile_physics)}
         if PEER_MPE in unit.sides:
             measured[PEER_MPE] = min(unit.num_envs, mpe_max_envs or unit.num_envs)
             cases[PEER_MPE] = _mpe._mpe_case(measured[PEER_MPE], steps, seed)
         unit.n_agents = _mpe.N_AGENTS
     elif w.kind in ("spheres", "agents_curve"):
-        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed) for side in unit.sides}
+        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed, compile_physics)
+                 for side in unit.sides}
     else:
-        cases = _env_cases(unit, steps, seed)
+        cases = _env_cases(unit, steps, seed, compile_physics)
     timings = time_alternating(cases, repeats=repeats, warmup=warmup, on_run=on_run)
     rows = [_time_row(run_id, unit, side, steps, timings[side], measured[side], loadavg) for side in unit.sides]
+    for row in rows:
+        row["compiled"] = bool(compile_physics and row["side"] == SIDE)
     del cases, timings
     return rows
 
@@ -372,13 +379,15 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
               scale: float = 1.0, threads: Optional[int] = None, peers: Optional[Sequence[str]] = None,
               curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
               max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS, mpe_max_envs: Optional[int] = None,
-              seed: int = 0, progress: bool = True) -> List[dict]:
+              seed: int = 0, progress: bool = True, compile_physics: bool = False) -> List[dict]:
     """Measure the chosen workloads (default all); one row per (workload, point, side).
 
     Every row has ``status``: ``ok``, ``skipped`` (``note`` says why: scenario not
     available, peer missing, above ``max_peer_agents``) or ``error`` (the exception,
     also printed on stderr; the other workloads still run). Raises ValueError for
     bad options. ``threads`` pins torch threads here and in the memory subprocesses.
+    ``compile_physics`` runs vmas_ros's physics step through torch.compile (compiled in
+    the warm-up runs, not timed; memory_30k stays eager).
     """
     validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs, curve_agents,
                            max_peer_agents, mpe_max_envs)
@@ -405,7 +414,8 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
             measured: List[dict] = []
             if unit.sides:
                 try:
-                    measured = _measure(unit, run_id, steps, repeats, warmup, in_effect, mpe_max_envs, seed, on_run)
+                    measured = _measure(unit, run_id, steps, repeats, warmup, in_effect, mpe_max_envs, seed, on_run,
+                                        compile_physics)
                 except Exception as error:  # one broken workload must not lose an hour of others
                     traceback.print_exc(file=sys.stderr)
                     message = f"{type(error).__name__}: {error}"
@@ -449,7 +459,11 @@ def run_suite_command(args) -> int:
         print(f"vmas-ros bench suite: {error}", file=sys.stderr)
         return 2
     plot = plot_available(not getattr(args, "no_plot", False))
-    rows = run_suite(progress=not getattr(args, "no_progress", False), **options)
+    compile_physics = bool(getattr(args, "compile_physics", False))
+    if compile_physics and options["warmup"] < 1:
+        print("vmas-ros bench suite: --compile-physics needs --warmup >= 1 (the first run compiles)", file=sys.stderr)
+        return 2
+    rows = run_suite(progress=not getattr(args, "no_progress", False), compile_physics=compile_physics, **options)
     paths = write_suite_results(rows, getattr(args, "out", "bench_results"), plot=plot)
     print(format_suite_table(summarize(rows)))
     print()

@@ -37,7 +37,7 @@ SUITE_COLUMNS = [
     "run_id", "workload", "scenario", "side", "status", "note", "device", "num_envs", "n_agents", "steps",
     "repeats", "metric", "value", "unit", "median_s", "min_s", "max_s", "per_step_ms", "env_steps_per_s",
     "extrapolated", "measured_envs", "threads", "times_s", "rss_mb", "baseline_rss_mb", "peak_rss_mb",
-    "loadavg_1m",
+    "loadavg_1m", "compiled",
 ]
 
 
@@ -270,7 +270,10 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
                 "notes": notes, "rows": rows, "summary": summary}
     with open(paths["json"], "w", encoding="utf-8") as handle:
         json.dump(document, handle, indent=2, allow_nan=False)
+    compiled = any(r.get("compiled") for r in rows)
     header = ("# Benchmark suite: vmas_ros vs VMAS 1.5.2 (issue 7)\n\n"
+              + ("vmas_ros physics compiled with torch.compile (`--compile-physics`; memory_30k eager).\n\n"
+                 if compiled else "vmas_ros eager (no torch.compile).\n\n")
               + _title(info, f"{'/'.join(map(str, sorted({r['steps'] for r in rows})))} steps per run").replace(
                   "\n", ". ") + "\n\n")
     paths["md"].write_text(header + format_suite_table(summary) + "\n", encoding="utf-8")

@@ -32,10 +32,12 @@ __all__ = [
     "cross2",
     "segment_endpoints",
     "closest_point_on_segment",
+    "closest_point_on_segment_xy",
     "segment_intersection",
     "closest_points_segment_segment",
     "box_edges",
     "closest_point_on_box_boundary",
+    "closest_point_on_box_boundary_xy",
     "closest_points_box_segment",
     "closest_points_box_box",
     "solid_box_inner_point",
@@ -124,6 +126,17 @@ def closest_point_on_segment(
     return center + along[..., None] * d
 
 
+def closest_point_on_segment_xy(
+    cx: Tensor, cy: Tensor, rot: Tensor, length: Scalar, px: Tensor, py: Tensor
+) -> Tuple[Tensor, Tensor]:
+    """:func:`closest_point_on_segment` on separate x/y components (same float arithmetic)."""
+    dx, dy = torch.cos(rot), torch.sin(rot)
+    along = (px - cx) * dx + (py - cy) * dy
+    half = length / 2
+    along = torch.maximum(torch.minimum(along, half), -half)
+    return cx + along * dx, cy + along * dy
+
+
 def segment_intersection(
     a_plus: Tensor, a_minus: Tensor, b_plus: Tensor, b_minus: Tensor
 ) -> Tuple[Tensor, Tensor]:
@@ -199,17 +212,23 @@ def box_edges(
 def closest_point_on_box_boundary(
     center: Tensor, rot: Scalar, length: Scalar, width: Scalar, point: Tensor
 ) -> Tensor:
-    """Nearest point on the box outline (also for points inside the box).
-
-    The four sides are tried in :func:`box_edges` order with a running minimum
-    over x and y kept as separate ``[...]`` tensors: stacking the sides into
-    ``[..., 4, 2]`` candidates made every op stride over pairs of floats, and this
-    kernel is the box-sphere contact of every substep. Each side's candidate is
-    the same float arithmetic as :func:`closest_point_on_segment` on that side,
-    and the first side wins ties, as ``argmin`` would.
-    """
+    """Nearest point on the box outline (also for points inside the box)."""
     (center, point), (rot, length, width) = _broadcast((center, point), (rot, length, width))
-    cx, cy, px, py = center[..., 0], center[..., 1], point[..., 0], point[..., 1]
+    x, y = closest_point_on_box_boundary_xy(center[..., 0], center[..., 1], rot, length, width, point[..., 0], point[..., 1])
+    return torch.stack([x, y], dim=-1)
+
+
+def closest_point_on_box_boundary_xy(
+    cx: Tensor, cy: Tensor, rot: Tensor, length: Scalar, width: Scalar, px: Tensor, py: Tensor
+) -> Tuple[Tensor, Tensor]:
+    """:func:`closest_point_on_box_boundary` on separate x/y components.
+
+    The four sides are tried in :func:`box_edges` order with a running minimum:
+    stacking them into ``[..., 4, 2]`` candidates made every op stride over pairs
+    of floats, and this kernel is the box-sphere contact of every substep. Each
+    side's candidate is the same float arithmetic as :func:`closest_point_on_segment`
+    on that side, and the first side wins ties, as ``argmin`` would.
+    """
     across = rot + math.pi / 2
     cos_d, sin_d, cos_n, sin_n = torch.cos(rot), torch.sin(rot), torch.cos(across), torch.sin(across)
     half_l, half_w = length / 2, width / 2
@@ -232,10 +251,10 @@ def closest_point_on_box_boundary(
         if best_dist is None:
             best_x, best_y, best_dist = qx, qy, dist
         else:
-            closer = dist < best_dist
-            best_x, best_y = torch.where(closer, qx, best_x), torch.where(closer, qy, best_y)
+            closer = torch.lt(dist, best_dist, out=dist.new_empty(dist.shape))  # float 0/1: where() is slow on CPU
+            best_x, best_y = qx * closer + best_x * (1 - closer), qy * closer + best_y * (1 - closer)
             best_dist = torch.minimum(dist, best_dist)
-    return torch.stack([best_x, best_y], dim=-1)
+    return best_x, best_y
 
 
 def closest_points_box_segment(

@@ -61,6 +61,12 @@ class JointTable:
     dist: Tensor  # [J, 1]
     rotate: Tensor  # [J] bool
 
+    def __post_init__(self) -> None:
+        # planar views for the step (contacts.joint_forces): anchor components [J, 1], lock as float 0/1
+        self.anchor_ax, self.anchor_ay = self.anchor_a[..., 0], self.anchor_a[..., 1]
+        self.anchor_bx, self.anchor_by = self.anchor_b[..., 0], self.anchor_b[..., 1]
+        self.locked = (~self.rotate).to(self.dist.dtype).reshape(-1, 1)
+
     @property
     def index_ab(self) -> Tensor:
         return torch.stack([self.index_a, self.index_b], dim=1).flatten()

