@@ -1,5 +1,10 @@
-"""Environments: the vectorized Environment, make_env, and wrappers for RL libraries."""
-from vmas_ros.envs.environment import Environment
-from vmas_ros.envs.make_env import make_env
+"""Environments: the vectorized Environment, make_env, and wrappers for RL libraries.
 
-__all__ = ["Environment", "make_env"]
+The wrappers (``gymnasium_env``, ``gymnasium_vec``, ``pettingzoo_env``,
+``rllib_env``, ``torchrl_env``) are not imported here: ``make_env(wrapper=...)``
+imports the one asked for, so ``import vmas_ros`` never loads ray, pettingzoo or torchrl.
+"""
+from vmas_ros.envs.environment import Environment
+from vmas_ros.envs.make_env import WRAPPERS, make_env, wrap
+
+__all__ = ["Environment", "WRAPPERS", "make_env", "wrap"]

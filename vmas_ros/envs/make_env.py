@@ -1,17 +1,57 @@
 """``make_env``: build a vectorized environment from a scenario name or instance."""
 from __future__ import annotations
 
-from typing import Optional, Union
+import importlib
+from enum import Enum
+from typing import Any, Dict, Optional, Tuple, Union
 
 from vmas_ros.envs.environment import Environment
 from vmas_ros.simulator.scenario import BaseScenario
+
+#: wrapper name -> (module, class), imported only when asked for: ``import vmas_ros``
+#: must not pull in ray, pettingzoo or torchrl
+WRAPPERS: Dict[str, Tuple[str, str]] = {
+    "gymnasium": ("vmas_ros.envs.gymnasium_env", "GymnasiumEnv"),
+    "gymnasium_vec": ("vmas_ros.envs.gymnasium_vec", "GymnasiumVecEnv"),
+    "pettingzoo": ("vmas_ros.envs.pettingzoo_env", "PettingZooEnv"),
+    "rllib": ("vmas_ros.envs.rllib_env", "RLlibMultiAgentEnv"),
+    "torchrl": ("vmas_ros.envs.torchrl_env", "TorchRLEnv"),
+}
+#: wrappers that report terminated and truncated apart, so make_env turns the flag on for them
+_SPLIT_DONE = {"gymnasium", "gymnasium_vec", "pettingzoo", "rllib"}
+
+
+def wrapper_name(wrapper: Union[str, Enum]) -> str:
+    """The registry key for ``wrapper``: a name in any case, or an enum member.
+
+    Enums are read by value when it is a string (``vmas_ros.simulator.environment.Wrapper``)
+    and by member name otherwise (VMAS's own ``Wrapper.GYMNASIUM``), so VMAS code
+    that passes either spelling keeps working.
+    """
+    if isinstance(wrapper, Enum):
+        wrapper = wrapper.value if isinstance(wrapper.value, str) else wrapper.name
+    if not isinstance(wrapper, str):
+        raise ValueError(f"wrapper must be a name or a Wrapper enum member, got {type(wrapper).__name__}")
+    name = wrapper.lower()
+    if name not in WRAPPERS:
+        hint = "; OpenAI gym is not supported, use 'gymnasium'" if name == "gym" else ""
+        raise ValueError(f"unknown wrapper {wrapper!r}{hint} (valid: None, {', '.join(repr(w) for w in WRAPPERS)})")
+    return name
+
+
+def wrap(env: Environment, wrapper: Union[str, Enum], **wrapper_kwargs: Any) -> Any:
+    """Put ``env`` behind the named library wrapper, importing that library only now."""
+    module_name, class_name = WRAPPERS[wrapper_name(wrapper)]
+    cls = getattr(importlib.import_module(module_name), class_name)
+    return cls(env, **wrapper_kwargs)
+
 
 def make_env(
     scenario: Union[str, BaseScenario],
     num_envs: int = 32,
     device="cpu",
     continuous_actions: bool = True,
-    wrapper=None,
+    wrapper: Union[None, str, Enum] = None,
     max_steps: Optional[int] = None,
     seed: Optional[int] = None,
     dict_spaces: bool = False,
@@ -20,14 +60,26 @@ def make_env(
     grad_enabled: bool = False,
     terminated_truncated: bool = False,
     wrapper_kwargs: Optional[dict] = None,
+    compile_physics: bool = False,
     **kwargs,
-) -> Environment:
+) -> Any:
     """Create ``num_envs`` batched copies of ``scenario`` on ``device``.
 
     ``scenario`` is a registered name (see ``vmas_ros.scenarios.list_scenarios()``)
     or a BaseScenario instance; extra keyword arguments go to its ``make_world``.
+    ``wrapper`` (``"gymnasium"``, ``"gymnasium_vec"``, ``"pettingzoo"``, ``"rllib"``,
+    ``"torchrl"`` or a ``Wrapper`` member) returns that library's env instead, built
+    with ``wrapper_kwargs``; the gymnasium, pettingzoo and rllib ones always get
+    ``terminated_truncated=True`` because those APIs report the two apart.
+    ``compile_physics=True`` runs the physics step through ``torch.compile``
+    (see ``World.compile_physics``: faster at large batch sizes, compiles on the
+    first step; not in VMAS).
     """
     from vmas_ros.scenarios import load
+
+    name = None if wrapper is None else wrapper_name(wrapper)  # a bad name fails before the world is built
+    if name in _SPLIT_DONE:
+        terminated_truncated = True
 
     if isinstance(scenario, str):
         scenario = load(scenario)
@@ -49,9 +101,8 @@ def make_env(
         terminated_truncated=terminated_truncated,
         **kwargs,
     )
-    if wrapper is None:
+    if compile_physics:
+        env.world.compile_physics()
+    if name is None:
         return env
-    raise ValueError(
-        f"unknown wrapper {wrapper!r}; wrappers for gymnasium, pettingzoo, torchrl and rllib are "
-        f"not available in this version (valid: None)"
-    )
+    return wrap(env, name, **(wrapper_kwargs or {}))

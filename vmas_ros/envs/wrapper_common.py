@@ -1,0 +1,195 @@
+"""What the library wrappers (gymnasium, gymnasium_vec, pettingzoo, rllib) share.
+
+Every wrapper does the same three conversions: the Environment's per-agent
+tensors (a list, or a dict by name with ``dict_spaces=True``) become numpy
+arrays keyed by agent; numpy actions become ``[num_envs, size]`` tensors on
+``env.device``; and the per-agent spaces are read off the Environment's own
+gymnasium spaces. Keeping them here means one place decides dtypes and shape
+checks, so the four wrappers cannot drift apart.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from torch import Tensor
+
+from vmas_ros.envs.environment import Environment
+
+__all__ = [
+    "agent_names",
+    "agent_spaces",
+    "actions_to_tensors",
+    "by_agent",
+    "pack",
+    "require_single_env",
+    "merge_where",
+    "require_terminated_truncated",
+    "select_env",
+    "to_numpy",
+    "vector_info",
+]
+
+
+def require_single_env(env: Environment, wrapper: str, hint: str = "") -> None:
+    """Refuse batched Environments for wrappers whose library sees one episode at a time."""
+    if env.num_envs != 1:
+        raise ValueError(
+            f"wrapper {wrapper!r} needs num_envs=1, got num_envs={env.num_envs}{hint}"
+        )
+
+
+def require_terminated_truncated(env: Environment, wrapper: str) -> None:
+    """The libraries separate termination from truncation; the Environment must report both.
+
+    ``make_env(wrapper=...)`` turns ``terminated_truncated`` on by itself; this
+    only fires when a wrapper class is built around an Environment made without it.
+    """
+    if not env.terminated_truncated:
+        raise ValueError(
+            f"wrapper {wrapper!r} needs an Environment made with terminated_truncated=True "
+            f"(make_env(..., wrapper={wrapper!r}) sets it for you)"
+        )
+
+
+def agent_names(env: Environment) -> List[str]:
+    """The names of the agents that take actions, in the Environment's order."""
+    return [agent.name for agent in env.agents]
+
+
+def by_agent(env: Environment, values: Union[Sequence, Mapping]) -> Dict[str, Any]:
+    """Per-agent values keyed by name, whether the Environment returned a list or a dict."""
+    if isinstance(values, Mapping):
+        return dict(values)
+    return {agent.name: value for agent, value in zip(env.agents, values)}
+
+
+def pack(values: Dict[str, Any], as_dict: bool) -> Union[Tuple, Dict[str, Any]]:
+    """A dict by agent name, or a tuple in agent order (gymnasium's Tuple space accepts tuples)."""
+    return dict(values) if as_dict else tuple(values.values())
+
+
+def agent_spaces(env: Environment) -> Tuple[Dict[str, spaces.Space], Dict[str, spaces.Space]]:
+    """Per-agent (observation, action) spaces by name, the same objects the Environment holds."""
+    names = agent_names(env)
+    obs_space, act_space = env.observation_space, env.action_space
+    if isinstance(obs_space, spaces.Dict):
+        return {n: obs_space[n] for n in names}, {n: act_space[n] for n in names}
+    return dict(zip(names, obs_space.spaces)), dict(zip(names, act_space.spaces))
+
+
+def to_numpy(value: Any, index: Optional[int] = None) -> Any:
+    """Tensors (also nested in dicts, lists, tuples) to numpy; ``index`` picks one env's row.
+
+    Floating point values become float32 because every Box space the Environment
+    builds is float32, and gymnasium's ``Box.contains`` refuses float64.
+    """
+    if isinstance(value, Tensor):
+        tensor = value.detach()
+        if index is not None:
+            tensor = tensor[index]
+        array = tensor.cpu().numpy()
+        if np.issubdtype(array.dtype, np.floating) and array.dtype != np.float32:
+            array = array.astype(np.float32)
+        return array
+    if isinstance(value, Mapping):
+        return {key: to_numpy(item, index) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(to_numpy(item, index) for item in value)
+    return value
+
+
+def select_env(value: Any, index: int) -> Any:
+    """One env's row of every tensor in a nested structure, kept as tensors (``return_numpy=False``)."""
+    if isinstance(value, Tensor):
+        return value[index]
+    if isinstance(value, Mapping):
+        return {key: select_env(item, index) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(select_env(item, index) for item in value)
+    return value
+
+
+def _expected_shapes(space: spaces.Space, batch: Optional[int]) -> List[Tuple[int, ...]]:
+    """Action shapes accepted for one agent: the space's shape, plus a trailing 1 for Discrete."""
+    lead = () if batch is None else (batch,)
+    shapes = [lead + tuple(space.shape)]
+    if isinstance(space, spaces.Discrete):
+        shapes.append(lead + (1,))
+    return shapes
+
+
+def actions_to_tensors(
+    env: Environment,
+    actions: Union[Sequence, Mapping],
+    batched: bool,
+    names: Optional[Sequence[str]] = None,
+) -> List[Tensor]:
+    """Numpy (or list, or tensor) actions per agent -> ``[num_envs, size]`` tensors on ``env.device``.
+
+    ``batched=False`` means one env's action per agent (the space's own shape),
+    ``batched=True`` adds the leading ``num_envs`` dimension. A wrong shape raises
+    a ValueError naming the agent and the expected shape here, because after the
+    reshape to ``[num_envs, size]`` the Environment could no longer tell which
+    shape the caller meant. Range, NaN and dtype checks stay the Environment's.
+    """
+    names = list(names) if names is not None else agent_names(env)
+    if isinstance(actions, Mapping):
+        missing = [n for n in names if n not in actions]
+        unknown = [k for k in actions if k not in names]
+        if missing or unknown:
+            raise ValueError(f"actions must have exactly the agents {names}; missing {missing}, unknown {unknown}")
+        ordered = [actions[n] for n in names]
+    elif isinstance(actions, (list, tuple)):
+        if len(actions) != len(names):
+            raise ValueError(f"expected actions for {len(names)} agents {names}, got {len(actions)}")
+        ordered = list(actions)
+    else:
+        raise ValueError(
+            f"actions must be a tuple/list (one per agent) or a dict by agent name, got {type(actions).__name__}"
+        )
+    _, act_spaces = agent_spaces(env)
+    batch = env.num_envs if batched else None
+    tensors = []
+    for agent, name, action in zip(env.agents, names, ordered):
+        space = act_spaces[name]
+        if isinstance(action, Tensor):
+            tensor = action  # the Environment refuses a wrong device with a message saying so
+        else:
+            try:
+                tensor = torch.as_tensor(np.asarray(action), device=env.device)
+            except (TypeError, ValueError, RuntimeError) as error:
+                raise ValueError(f"action for agent {name!r} is not numeric: {error}") from None
+        accepted = _expected_shapes(space, batch)
+        if tuple(tensor.shape) not in accepted:
+            raise ValueError(
+                f"action for agent {name!r} has shape {tuple(tensor.shape)}, expected {accepted[0]} "
+                f"(action space {space})"
+            )
+        if env.continuous_actions and tensor.dtype.is_floating_point and tensor.dtype != torch.float32:
+            tensor = tensor.float()
+        tensors.append(tensor.reshape(env.num_envs, env.get_agent_action_size(agent)))
+    return tensors
+
+
+def vector_info(tree: Mapping, mask: np.ndarray) -> Dict[str, Any]:
+    """Batched infos in gymnasium's vector layout: each key ``k`` gets a boolean ``_k`` mask."""
+    out: Dict[str, Any] = {}
+    for key, value in tree.items():
+        out[key] = vector_info(value, mask) if isinstance(value, Mapping) else value
+        out[f"_{key}"] = mask.copy()
+    return out
+
+
+def merge_where(mask: Tensor, new: Any, old: Any) -> Any:
+    """``new`` where ``mask`` (per env) is set, else ``old``; recurses into dicts, lists and tuples."""
+    if isinstance(new, Tensor):
+        shaped = mask.reshape(-1, *([1] * (new.dim() - 1)))
+        return torch.where(shaped, new, old)
+    if isinstance(new, Mapping):
+        return {key: merge_where(mask, new[key], old[key]) for key in new}
+    if isinstance(new, (list, tuple)):
+        return type(new)(merge_where(mask, n, o) for n, o in zip(new, old))
+    return new
