@@ -37,7 +37,7 @@ def to_action_tensor(action, agent_name: str, num_envs: int, size: int, device: 
     if not continuous and action.dtype.is_floating_point:
         if not bool(torch.all(action == action.round())):
             raise ValueError(f"discrete action for agent {agent_name!r} has non-integer values")
-    return action.to(device)
+    return action if action.device == device else action.to(device)
 
 
 def check_finite_and_range(actions: List[Tensor], lows: List[Tensor], highs: List[Tensor], names: List[str], what: str) -> None:

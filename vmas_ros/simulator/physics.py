@@ -152,8 +152,9 @@ def step(
                                        (zero if t_b is None else t_b).unsqueeze(-1))
 
         if substep == 0:
-            vel = vel * (1 - tables.drag)
-            ang_vel = ang_vel * (1 - tables.drag)
+            keep = _keep_fraction(tables)
+            vel = vel * keep
+            ang_vel = ang_vel * keep
         new_vel = vel + force / tables.mass * sub_dt
         if tables.limits_speed:
             new_vel = clamp_norm(new_vel, tables.max_speed)
@@ -168,6 +169,14 @@ def step(
         rot = torch.where(tables.rotatable, rot + new_ang_vel * sub_dt, rot)
         ang_vel = torch.where(tables.rotatable, new_ang_vel, state.ang_vel if substep == 0 else ang_vel)
     return BodyState(pos, vel, rot, ang_vel)
+
+
+def _keep_fraction(tables: WorldTables) -> Tensor:
+    """``1 - drag`` per entity [N, 1, 1], computed once per tables (the same float as computing it each step)."""
+    keep = getattr(tables, "_keep_cache", None)
+    if keep is None:
+        keep = tables._keep_cache = 1 - tables.drag
+    return keep
 
 
 def _clamp_to_bounds(pos: Tensor, x_semidim: Optional[float], y_semidim: Optional[float]) -> Tensor:

@@ -50,7 +50,8 @@ class _Batched:
                 f"{owner}.{name} must have batch dimension {self._batch_dim} first, "
                 f"got shape {tuple(value.shape)}"
             )
-        return value.to(self._device)
+        # the common case (already there) skips a dispatcher call: setters run several times per step
+        return value if value.device == self._device else value.to(self._device)
 
 
 def _state_tensor(name: str, width: int, doc: str):

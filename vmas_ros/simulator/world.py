@@ -284,8 +284,15 @@ class World:
         n_agents = tables.n_agents
         if n_agents == 0:
             return torch.zeros_like(state.pos), torch.zeros_like(state.rot)
-        agent_force = torch.stack([a.state._force for a in self._agents])
-        agent_torque = torch.stack([a.state._torque for a in self._agents])
+        n_landmarks = tables.n_entities - n_agents
+        forces = [a.state._force for a in self._agents]
+        torques = [a.state._torque for a in self._agents]
+        fixed = self._fixed_agents(tables)
+        if not (tables.limits_force or tables.limits_torque or fixed):
+            # the common case: one stack per field, landmarks' rows from a cached zero block
+            zero_f, zero_t = self._zero_rows(state.pos)
+            return (torch.stack([zero_f] * n_landmarks + forces), torch.stack([zero_t] * n_landmarks + torques))
+        agent_force, agent_torque = torch.stack(forces), torch.stack(torques)
         if tables.limits_force:
             agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
             agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
@@ -299,14 +306,28 @@ class World:
                     agent.state._force = f
                 if agent.rotatable:
                     agent.state._torque = t
-        agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
-        agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
-        n_landmarks = tables.n_entities - n_agents
+        if fixed:
+            agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
+            agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
         if n_landmarks == 0:
             return agent_force, agent_torque
         force = torch.cat([agent_force.new_zeros((n_landmarks, *agent_force.shape[1:])), agent_force])
         torque = torch.cat([agent_torque.new_zeros((n_landmarks, *agent_torque.shape[1:])), agent_torque])
         return force, torque
+
+    def _fixed_agents(self, tables: WorldTables) -> bool:
+        """Whether some agent cannot move or rotate (its action force or torque is then ignored)."""
+        cached = getattr(tables, "_fixed_agents_cache", None)
+        if cached is None:
+            cached = tables._fixed_agents_cache = not all(a.movable and a.rotatable for a in self._agents)
+        return cached
+
+    def _zero_rows(self, like: Tensor) -> Tuple[Tensor, Tensor]:
+        """Cached zero force [B, 2] and torque [B, 1] rows for entities without actions."""
+        cached = getattr(self, "_zero_rows_cache", None)
+        if cached is None or cached[0].device != like.device or cached[0].shape[0] != like.shape[1]:
+            cached = self._zero_rows_cache = (like.new_zeros(like.shape[1], 2), like.new_zeros(like.shape[1], 1))
+        return cached
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""

@@ -52,7 +52,9 @@ class Scenario(BaseScenario):
             list(range(n_landmarks)) + ([n_landmarks + j for j in range(n_agents) if j != i] if self.obs_agents else [])
             for i in range(n_agents)
         ]
-        self._seen_rows_on: dict = {}  # device -> one index tensor per agent
+        self._seen_rows_on: dict = {}  # device -> [A, R] index tensor
+        self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
+        self._obs_cache = None  # (pos stack, vel stack, observations) of the last state observed
         self._radius_sums = None
         return world
 
@@ -88,12 +90,28 @@ class Scenario(BaseScenario):
         return self._reward_cache
 
     def observation(self, agent: Agent) -> torch.Tensor:
-        stacked = self.world.stacked_state("pos")
-        rows = self._seen_rows_on.get(stacked.device)
+        return self._observations()[self._agent_index[agent.name]]
+
+    def _observations(self) -> torch.Tensor:
+        """Every agent's observation [A, B, obs], computed once per state.
+
+        Keyed on the identity of the world's stacked positions and velocities:
+        ``stacked_state`` hands out a new stack whenever the state changed (a
+        step, a reset, a ``set_pos``), so a cached result is never stale.
+        """
+        pos, vel = self.world.stacked_state("pos"), self.world.stacked_state("vel")
+        cached = self._obs_cache
+        if cached is not None and cached[0] is pos and cached[1] is vel:
+            return cached[2]
+        rows = self._seen_rows_on.get(pos.device)
         if rows is None:
-            rows = self._seen_rows_on[stacked.device] = [torch.tensor(r, device=stacked.device) for r in self._seen_rows]
-        relative = stacked.index_select(0, rows[self.world.agents.index(agent)]) - agent.state.pos
-        return torch.cat([agent.state.pos, agent.state.vel, relative.transpose(0, 1).flatten(1)], dim=-1)
+            rows = self._seen_rows_on[pos.device] = torch.tensor(self._seen_rows, device=pos.device)
+        n_landmarks = len(self.world.landmarks)
+        own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
+        relative = pos[rows] - own_pos.unsqueeze(1)  # [A, R, B, 2]
+        observations = torch.cat([own_pos, own_vel, relative.permute(0, 2, 1, 3).flatten(2)], dim=-1)
+        self._obs_cache = (pos, vel, observations)
+        return observations
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):
