@@ -28,13 +28,18 @@ Durability
     cut can lose more.
 
 Signals
-    With ``defer_signals`` (the default) a write from the main thread blocks
+    With ``defer_signals`` (the default) a write from the main thread defers
     SIGINT and SIGTERM while it changes the file's state, so that a
     KeyboardInterrupt or a ``sys.exit`` from a signal handler lands between two
     writes, never in the middle of one (which would leave a corrupt chunk for
-    the ``atexit`` close to finish). That costs two ``pthread_sigmask`` calls
-    per write (a few microseconds); :meth:`McapRecorder.batch` pays them once
-    for a group of writes.
+    the ``atexit`` close to finish). Two things are needed for that: the main
+    thread blocks both signals (``pthread_sigmask``), and Python-level handlers
+    are swapped for one that only notes the signal, because a signal the kernel
+    delivers to another thread (torch's, rclpy's) still makes the main thread
+    run its Python handler at the next bytecode. The noted signals go to the
+    original handlers as soon as the write is complete. That costs a few
+    microseconds per write; :meth:`McapRecorder.batch` pays it once for a group
+    of writes.
 """
 from __future__ import annotations
 
@@ -248,18 +253,8 @@ class McapRecorder:
             raise ValueError(f"log_time_ns must be a non-negative integer of nanoseconds, not {log_time_ns!r}")
         if type(data) is not bytes:
             data = bytes(data)
-        # inlined _deferred_signals(): this is the hot path
-        defer = self._defer and not self._deferring and threading.get_ident() == _MAIN_THREAD_ID
-        if defer:
-            old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
-            self._deferring += 1
-        try:
-            with self._lock:
-                self._record_locked(topic, type_name, data, log_time, qos)
-        finally:
-            if defer:
-                self._deferring -= 1
-                signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        with self._deferred_signals(), self._lock:
+            self._record_locked(topic, type_name, data, log_time, qos)
         return True
 
     def _record_locked(self, topic: str, type_name: str, data: bytes, log_time: int, qos: str) -> None:
@@ -314,13 +309,23 @@ class McapRecorder:
         if not self._defer or self._deferring or threading.get_ident() != _MAIN_THREAD_ID:
             yield
             return
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
+        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
+        noted: list = []
+        # Python handlers (signal.getsignal is callable) are held; handlers installed from C
+        # (getsignal is None, e.g. rclpy's) run outside Python bytecode and are left alone
+        held = {sig: handler for sig in _DEFERRED if callable(handler := signal.getsignal(sig))}
+        for sig in held:
+            signal.signal(sig, lambda signum, frame: noted.append(signum))
         self._deferring += 1
         try:
             yield
         finally:
             self._deferring -= 1
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+            for sig, handler in held.items():
+                signal.signal(sig, handler)
+            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+            for signum in noted:  # now, between writes, as if it had just arrived
+                held[signum](signum, None)
 
     @contextlib.contextmanager
     def batch(self) -> Iterator[None]:
