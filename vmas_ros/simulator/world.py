@@ -32,6 +32,10 @@ from vmas_ros.simulator.utils import (
 __all__ = ["World"]
 
 
+#: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
+_EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
+
+
 class World:
     """A batch of ``batch_dim`` 2D worlds sharing the same entities (VMAS ``World``)."""
 
@@ -87,6 +91,8 @@ class World:
         self._broad_phase = self.default_broad_phase
         #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
         self._physics_step = physics.step
+        #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
+        self._ray_kernels = _EAGER_RAY_KERNELS
 
     #: How contacts near the broad-phase radius are decided: "batch" (VMAS 1.5
     #: behaviour, bit-for-bit parity) or "env" (each env independent of the others).
@@ -107,7 +113,8 @@ class World:
 
         The step is a fixed sequence of batched kernels with no host reads, so
         the compiler fuses it into a few loops: on a 2-core CPU, simple_spread at
-        30,000 envs and flocking at 10,000 step about 2.5-3x faster. The first
+        30,000 envs and flocking at 10,000 step about 2.5-3x faster. The LIDAR's
+        ray kernels (``cast_rays``) are compiled too. The first
         step compiles (about 5-30 s on a CPU, which needs a C++ compiler); a new
         batch size or a change of entities compiles again. ``mode`` goes to
         ``torch.compile`` (e.g. ``"reduce-overhead"``: CUDA graphs on a GPU).
@@ -117,8 +124,11 @@ class World:
         """
         if not enabled:
             self._physics_step = physics.step
+            self._ray_kernels = _EAGER_RAY_KERNELS
             return
         self._physics_step = torch.compile(physics.step, dynamic=False, mode=mode)
+        # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
+        self._ray_kernels = {kind: torch.compile(fn, dynamic=False, mode=mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
@@ -430,15 +440,15 @@ class World:
             cx, cy = pos[..., 0:1], pos[..., 1:2]
             if kind == "sphere":
                 radius = torch.tensor([e.shape.radius for e in group], device=self._device).view(-1, 1, 1)
-                d = raycast.ray_sphere_xy(ox, oy, cos_a, sin_a, cx, cy, radius, max_range)
+                d = self._ray_kernels["sphere"](ox, oy, cos_a, sin_a, cx, cy, radius, max_range)
             else:
                 rot = torch.stack([e.state.rot for e in group])  # [E, B, 1]
                 cos_r, sin_r = torch.cos(rot), torch.sin(rot)
                 length = torch.tensor([e.shape.length for e in group], device=self._device).view(-1, 1, 1)
                 if kind == "box":
                     width = torch.tensor([e.shape.width for e in group], device=self._device).view(-1, 1, 1)
-                    d = raycast.ray_box_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, width, max_range)
+                    d = self._ray_kernels["box"](ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, width, max_range)
                 else:
-                    d = raycast.ray_segment_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, max_range)
+                    d = self._ray_kernels["line"](ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, max_range)
             nearest = torch.minimum(nearest, d.amin(dim=0))
         return nearest
