@@ -499,3 +499,19 @@ def test_render_rejects_bad_arguments():
         env.render(mode="bogus")
     with pytest.raises(ValueError, match="env_index"):
         env.render(env_index=2)
+
+
+def test_fresh_observations_are_handed_out_without_copies_and_never_alias(device):
+    """simple_spread sets fresh_observations: its observations are views of one batched result per
+    collection (no defensive copy), and writing into them changes nothing the env hands out later."""
+    env = vmas_ros.make_env("simple_spread", num_envs=4, device=device, seed=0)
+    assert env.scenario.fresh_observations
+    first = env.step(env.get_random_actions())[0]
+    # the agents' observations share one storage: no per-agent copy was made
+    assert first[0].untyped_storage().data_ptr() == first[1].untyped_storage().data_ptr()
+    expected = [o.clone() for o in env.get_from_scenario(True, False, False, False)[0]]
+    for o in first:
+        o.fill_(123.0)
+    again = env.get_from_scenario(True, False, False, False)[0]
+    for got, want in zip(again, expected):
+        torch.testing.assert_close(got, want)

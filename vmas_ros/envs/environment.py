@@ -303,7 +303,8 @@ class Environment:
 
         # rewards first, then observations: scenarios may cache work in reward()
         rewards = gather(self.scenario.reward, lambda r: r.clone()) if get_rewards else None
-        obs = gather(self.scenario.observation, TorchUtils.recursive_clone) if get_obs else None
+        keep = (lambda o: o) if self.scenario.fresh_observations else TorchUtils.recursive_clone
+        obs = gather(self.scenario.observation, keep) if get_obs else None
         infos = gather(self.scenario.info, TorchUtils.recursive_clone) if get_infos else None
         if self.terminated_truncated:
             terminated = truncated = None

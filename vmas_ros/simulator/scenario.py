@@ -23,6 +23,11 @@ class BaseScenario(abc.ABC):
     #: Set True in scenarios whose ``reset_world_at`` accepts a 1-D tensor of env
     #: indices; the environment then resets many envs in one call instead of one by one.
     supports_batched_reset: bool = False
+    #: Set True in scenarios whose ``observation`` returns tensors it never writes to
+    #: again (computed fresh, or views of a result computed fresh for the step): the
+    #: environment then hands them out without the defensive copy it makes of VMAS
+    #: scenarios' observations, which may be buffers the scenario updates in place.
+    fresh_observations: bool = False
 
     def __init__(self) -> None:
         self._world = None

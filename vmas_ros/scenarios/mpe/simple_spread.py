@@ -32,6 +32,7 @@ AGENT_RADIUS = 0.15
 
 class Scenario(BaseScenario):
     supports_batched_reset = True
+    fresh_observations = True  # views of a result computed once per collection, never written to
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         n_agents = kwargs.pop("n_agents", 3)
@@ -90,7 +91,13 @@ class Scenario(BaseScenario):
         return self._reward_cache
 
     def observation(self, agent: Agent) -> torch.Tensor:
-        return self._observations()[self._agent_index[agent.name]]
+        index = self._agent_index[agent.name]
+        observation = self._observations()[index]
+        if index == len(self._agent_index) - 1:
+            # the environment asks in agent order: the next collection computes afresh, so
+            # observations handed out (without a copy, see fresh_observations) never alias later ones
+            self._obs_cache = None
+        return observation
 
     def _observations(self) -> torch.Tensor:
         """Every agent's observation [A, B, obs], computed once per state.
