@@ -59,8 +59,10 @@ def mask_eq(a: Tensor, b) -> Tensor:
     return torch.eq(a, b, out=a.new_empty(_broadcast_shape(a, b)))
 
 
-def _broadcast_shape(a: Tensor, b) -> torch.Size:
-    return a.shape if not isinstance(b, Tensor) or b.shape == a.shape else torch.broadcast_shapes(a.shape, b.shape)
+def _broadcast_shape(a: Tensor, b) -> Tuple[int, ...]:
+    if not isinstance(b, Tensor) or b.shape == a.shape:
+        return tuple(a.shape)
+    return geo.broadcast_shape(a.shape, b.shape)
 
 
 def select(mask: Tensor, a: Tensor, b: Tensor) -> Tensor:

@@ -53,6 +53,23 @@ def _as_tensor(x: Scalar, like: Tensor) -> Tensor:
     return torch.as_tensor(x, dtype=like.dtype, device=like.device)
 
 
+def broadcast_shape(*shapes: Sequence[int]) -> Tuple[int, ...]:
+    """The shape ``shapes`` broadcast to, in plain Python (raises ValueError if they do not).
+
+    ``torch.broadcast_shapes`` imports sympy on first use: about 30 MB of
+    resident memory that a simulation never needs.
+    """
+    n = max((len(shape) for shape in shapes), default=0)
+    result = [1] * n
+    for shape in shapes:
+        for i, size in enumerate(shape, start=n - len(shape)):
+            if size != 1:
+                if result[i] not in (1, size):
+                    raise ValueError(f"shapes {[tuple(s) for s in shapes]} do not broadcast")
+                result[i] = size
+    return tuple(result)
+
+
 def _broadcast(
     vectors: Sequence[Tensor], scalars: Sequence[Scalar]
 ) -> Tuple[List[Tensor], List[Tensor]]:
@@ -63,7 +80,7 @@ def _broadcast(
     """
     ref = vectors[0]
     scal = [_as_tensor(s, ref) for s in scalars]
-    shape = torch.broadcast_shapes(*(v.shape[:-1] for v in vectors), *(s.shape for s in scal))
+    shape = broadcast_shape(*(v.shape[:-1] for v in vectors), *(s.shape for s in scal))
     return [v.expand(*shape, 2) for v in vectors], [s.expand(shape) for s in scal]
 
 
