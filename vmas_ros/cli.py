@@ -8,6 +8,10 @@ Subcommands:
     bench   benchmarks against upstream VMAS and MPE (speed ratios, CSV/JSON/PNG)
     evaluate  each scenario's heuristic against random play (mean episode returns, CSV/Markdown)
     render  roll out a scenario and save it as a GIF, MP4 or PNG
+    train   train a policy with CPPO, MAPPO, IPPO or HetIPPO (TorchRL PPO); exports it to ONNX
+    export  export a training checkpoint's policy as <stem>.onnx + <stem>.json
+    train-suite  the paper's Figure 3: every algorithm on every scenario (and seed), one plot per
+            scenario against its heuristic, a 2x2 figure, CSV and Markdown summary
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
     drive   publish a Twist on an agent's cmd_vel for a while
@@ -203,6 +207,20 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate = sub.add_parser("evaluate", help="every scenario's heuristic against random play: episode returns")
     add_evaluate_arguments(evaluate)
     evaluate.set_defaults(func=run_evaluate_command)
+    from vmas_ros.train.cli import add_export_arguments, add_train_arguments, run_export_command, run_train_command
+
+    train = sub.add_parser("train", help="train a policy (cppo, mappo, ippo, hetippo) and export it to ONNX")
+    add_train_arguments(train)
+    train.set_defaults(func=run_train_command)
+    from vmas_ros.train.suite import add_train_suite_arguments, run_train_suite_command
+
+    train_suite = sub.add_parser("train-suite", help="the paper's Figure 3: train cppo, mappo, ippo, hetippo "
+                                 "on several scenarios and plot them against the heuristics")
+    add_train_suite_arguments(train_suite)
+    train_suite.set_defaults(func=run_train_suite_command)
+    export = sub.add_parser("export", help="export a training checkpoint as <stem>.onnx + <stem>.json")
+    add_export_arguments(export)
+    export.set_defaults(func=run_export_command)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
     render.add_argument("--scenario", default="simple_spread", help="scenario name")
     render.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")

@@ -1,0 +1,125 @@
+"""``vmas-ros train`` and ``vmas-ros export``: argument parsing and entry points.
+
+Flags are generated from :class:`TrainConfig`'s fields (``lmbda`` is ``--lambda``,
+underscores become dashes), so the CLI, config files and the dataclass never
+drift apart. Precedence: dataclass defaults < ``--config FILE`` < checkpoint
+(``--resume``) < explicit flags.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import MISSING, fields
+from pathlib import Path
+from typing import Any, Dict
+
+from vmas_ros.train.config import ALGORITHM_NAMES, TrainConfig, load_config_file
+
+__all__ = ["add_train_arguments", "run_train_command", "add_export_arguments", "run_export_command"]
+
+
+def _flag(name: str) -> str:
+    return "--lambda" if name == "lmbda" else "--" + name.replace("_", "-")
+
+
+def _json_object(text: str) -> Dict[str, Any]:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"expected a JSON object, e.g. '{{\"n_agents\": 4}}': {error}")
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {type(value).__name__}")
+    return value
+
+
+def add_train_arguments(parser: argparse.ArgumentParser) -> None:
+    """One flag per TrainConfig field (default None = "not given"), plus --config and --resume."""
+    parser.add_argument("--config", default=None, metavar="FILE",
+                        help="YAML or JSON file of config fields (flags override it)")
+    parser.add_argument("--resume", default=None, metavar="DIR",
+                        help="continue the run in DIR (its checkpoint.pt) up to --iterations; "
+                             "output goes to DIR unless --out is given")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    for f in fields(TrainConfig):
+        default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
+        text = f.metadata.get("help", "")
+        help_text = f"{text} (default {json.dumps(default)})"
+        kwargs: Dict[str, Any] = {"dest": f.name, "default": None, "help": help_text}
+        if isinstance(default, bool):
+            kwargs["action"] = argparse.BooleanOptionalAction
+        elif isinstance(default, dict):
+            kwargs.update(type=_json_object, metavar="JSON")
+        else:
+            kwargs["type"] = type(default)
+        if f.name == "algorithm":
+            kwargs["choices"] = ALGORITHM_NAMES
+        parser.add_argument(_flag(f.name), **kwargs)
+
+
+def config_from_args(args: argparse.Namespace) -> tuple:
+    """(TrainConfig, resume checkpoint state or None) from parsed flags."""
+    values: Dict[str, Any] = {}
+    source = "flags"
+    if args.config:
+        values.update(load_config_file(args.config))
+        source = args.config
+    state = None
+    if args.resume:
+        from vmas_ros.train.checkpoint import load_checkpoint
+
+        state = load_checkpoint(args.resume)
+        values.update(state["config"])
+        values["out"] = str(Path(args.resume))
+        source = f"{args.resume} (checkpoint)"
+    flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name) is not None}
+    values.update(flags)
+    return TrainConfig.from_dict(values, source=source), state
+
+
+def run_train_command(args: argparse.Namespace) -> int:
+    """Train, print a summary; exit status 2 on bad configuration."""
+    try:
+        config, state = config_from_args(args)
+    except ValueError as error:
+        print(f"vmas-ros train: {error}", file=sys.stderr)
+        return 2
+    from vmas_ros.train.trainer import Trainer
+
+    try:
+        trainer = Trainer(config, resume_state=state, progress=not args.quiet)
+    except ValueError as error:
+        print(f"vmas-ros train: {error}", file=sys.stderr)
+        return 2
+    if state is not None:
+        print(f"resuming {config.out} at iteration {trainer.iteration} ({trainer.frames} frames)")
+    summary = trainer.run()
+    last = trainer.history[-1] if trainer.history else {}
+    print(f"trained {config.algorithm} on {config.scenario}: {summary['iterations']} iterations, "
+          f"{summary['frames']} frames; last mean episode reward {last.get('episode_reward_mean', float('nan')):.4f}")
+    if "eval" in summary:
+        print(f"evaluation ({summary['eval']['episodes']} episodes, deterministic): "
+              f"mean episode reward {summary['eval']['episode_reward_mean']:.4f}")
+    print(f"outputs in {config.out}: log.csv, learning_curve.png, checkpoint.pt, policy.onnx + policy.json"
+          + (", eval.gif" if "gif" in summary.get("eval", {}) else ""))
+    return 0
+
+
+def add_export_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--checkpoint", required=True, metavar="PATH",
+                        help="checkpoint.pt, or a run directory containing one")
+    parser.add_argument("--out", required=True, metavar="STEM",
+                        help="writes STEM.onnx and STEM.json (the policy format OnnxPolicy and the ROS node load)")
+
+
+def run_export_command(args: argparse.Namespace) -> int:
+    """Export a checkpoint's deterministic policy to ONNX + JSON metadata."""
+    from vmas_ros.train.export import export_checkpoint
+
+    try:
+        onnx_path, json_path = export_checkpoint(args.checkpoint, args.out)
+    except ValueError as error:
+        print(f"vmas-ros export: {error}", file=sys.stderr)
+        return 2
+    print(f"wrote {onnx_path} and {json_path}")
+    return 0
