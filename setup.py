@@ -58,6 +58,7 @@ setup(
         "console_scripts": [
             "vmas-ros = vmas_ros.cli:main",
             "sim_node = vmas_ros.ros.sim_node:main",
+            "policy_node = vmas_ros.ros.policy_node:main",
         ],
     },
     zip_safe=False,

@@ -28,15 +28,17 @@ def test_scenario_steps_and_publishes_in_sim_node(scenario, rclpy_context, monke
     monkeypatch.setattr(rclpy.node.Node, "__init__", _with_context(rclpy.node.Node.__init__, rclpy_context))
     node = SimNode(scenario=scenario, control="heuristic", num_envs=2, env_index=1, lidar_rays=6)
     try:
-        start = [(p.pose.position.x, p.pose.position.y) for p in node.pose_msgs]
+        messages = node.state_messages  # what the node published last, decoded from its bytes
+        poses = [t for t in messages.topics if t.endswith("/pose")]
+        start = [(p.pose.position.x, p.pose.position.y) for p in map(messages.decode, poses)]
         for _ in range(5):
             node.step_once()
-        end = [(p.pose.position.x, p.pose.position.y) for p in node.pose_msgs]
+        end = [(p.pose.position.x, p.pose.position.y) for p in map(messages.decode, poses)]
         assert node.steps == 5 and node.sim_time_ns == 5 * round(node.env.world.dt * 1e9)
         assert all(math.isfinite(v) for xy in end for v in xy)
         if any(a.movable for a in node.env.world.agents):  # simple_crypto's agents only talk
             assert start != end, "the heuristic moves someone"
-        scans = list(node.scan_msgs.values())
+        scans = [messages.decode(t) for t in messages.topics if "/scan" in t]
         # one scan per lidar: the scenario's own (their ray counts) or the node's 6-ray one
         lidars = [s for a in node.env.world.agents for s in a.sensors if hasattr(s, "n_rays")]
         assert scans and sorted(len(s.ranges) for s in scans) == sorted(lidar.n_rays for lidar in lidars)

@@ -23,7 +23,8 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     Options marked "suite:" only apply to ``vmas-ros bench suite``."""
     if with_benchmark_name:
         parser.add_argument("benchmark", nargs="?", default="mpe",
-                            help="which benchmark: mpe (default; the VMAS paper's Fig. 2) or suite (issue 7)")
+                            help="which benchmark: mpe (default; the VMAS paper's Fig. 2), suite (issue 7) or node "
+                                 "(sim_node's steps/s while publishing)")
     # dest is not ``num_envs``: cli.main compares args.num_envs with an int
     parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=list(DEFAULT_NUM_ENVS),
                         metavar="N", help="mpe: numbers of parallel envs (default: 1 10 100 1000)")
@@ -54,6 +55,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     suite.add_argument("--compile-physics", action="store_true",
                        help="suite: run vmas_ros's physics step through torch.compile (World.compile_physics); "
                             "compiled during the warm-up runs; memory_30k stays eager")
+    from vmas_ros.bench.node import add_node_bench_arguments
+
+    add_node_bench_arguments(parser)
     return parser
 
 
@@ -63,6 +67,10 @@ def run_bench_command(args: argparse.Namespace) -> int:
     from vmas_ros.bench import mpe
 
     benchmark = getattr(args, "benchmark", "mpe") or "mpe"
+    if benchmark == "node":
+        from vmas_ros.bench.node import run_node_bench_command
+
+        return run_node_bench_command(args)
     if benchmark not in BENCHMARKS:
         print(f"vmas-ros bench: unknown benchmark {benchmark!r}; valid: {', '.join(BENCHMARKS)}", file=sys.stderr)
         return 2

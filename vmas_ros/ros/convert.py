@@ -52,19 +52,30 @@ class Snapshot:
     scans: Dict[int, List[np.ndarray]]  # agent index -> one array per lidar
 
     @staticmethod
-    def take(world, env_index: int, lidars: Dict[int, list]) -> "Snapshot":
+    def take(world, env_index: int, lidars: Dict[int, list],
+             measurements: Optional[Dict[int, List[torch.Tensor]]] = None) -> "Snapshot":
+        """Env ``env_index`` with one device-to-host copy: the state of every entity and every scan.
+
+        ``measurements`` (agent index -> one [B, R] tensor per lidar) are readings taken
+        already this step; without them every lidar measures now.
+        """
         entities = world.entities
         with torch.no_grad():
-            state = torch.cat(
-                [
-                    torch.stack([e.state.pos[env_index] for e in entities]),
-                    torch.stack([e.state.vel[env_index] for e in entities]),
-                    torch.stack([e.state.rot[env_index] for e in entities]),
-                    torch.stack([e.state.ang_vel[env_index] for e in entities]),
-                ],
-                dim=1,
-            ).cpu().numpy()
-            scans = {i: [s.measure()[env_index].cpu().numpy() for s in sensors] for i, sensors in lidars.items()}
+            if measurements is None:
+                measurements = {i: [s.measure() for s in sensors] for i, sensors in lidars.items()}
+            # right after a step the stacks are the physics output itself (world.stacked_state)
+            state = torch.cat([world.stacked_state(name)[:, env_index].reshape(len(entities), -1)
+                               for name in ("pos", "vel", "rot", "ang_vel")], dim=1)
+            readings = [m[env_index].reshape(-1) for i in measurements for m in measurements[i]]
+            host = torch.cat([state.reshape(-1)] + [r.to(state.dtype) for r in readings]).cpu().numpy()
+        state = host[: state.numel()].reshape(len(entities), -1)
+        scans, offset = {}, state.size
+        for i, tensors in measurements.items():
+            scans[i] = []
+            for m in tensors:
+                n = m.shape[-1]
+                scans[i].append(host[offset: offset + n])
+                offset += n
         return Snapshot(state[:, 0:2], state[:, 2:4], state[:, 4], state[:, 5], scans)
 
 

@@ -14,7 +14,7 @@ import yaml
 
 #: parameters that may change while the node runs; the others need a restart
 RUNTIME = {"env_index", "cmd_vel_timeout", "control", "real_time_factor", "rate_hz"}
-CONTROL_MODES = ("zero", "heuristic")
+CONTROL_MODES = ("zero", "heuristic", "policy")
 DEVICES = ("cpu", "cuda", "auto")
 
 
@@ -43,6 +43,7 @@ class SimParams:
     record_topics: str = ""
     record_max_mb: float = 0.0
     record_max_duration_s: float = 0.0
+    policy_path: str = ""
 
     @staticmethod
     def names() -> List[str]:
@@ -126,6 +127,13 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
         return f"record_path must end in .mcap, got {value!r}"
     if name == "control" and value not in CONTROL_MODES:
         return f"control must be one of {', '.join(CONTROL_MODES)}, got {value!r}"
+    if name == "control" and value == "policy" and current is not None and not current.policy_path:
+        return "control: policy needs policy_path (an exported policy's .json), set when the node starts"
+    if name == "policy_path" and value:
+        import os
+
+        if not os.path.isfile(value):
+            return f"policy_path must name an existing file (an exported policy's .json), got {value!r}"
     return None
 
 
@@ -138,3 +146,60 @@ def resolve_device(device: str) -> str:
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise ValueError(f"device {device!r} requested but torch sees no CUDA device (use cpu or auto)")
     return device
+
+
+# ---------------------------------------------------------------- policy_node
+#: policy_node parameters that may change while it runs; the others need a restart
+POLICY_NODE_RUNTIME = {"rate_hz", "observation_timeout", "cmd_vel_scale"}
+POLICY_OUTPUTS = ("action", "cmd_vel")
+
+
+@dataclass
+class PolicyNodeParams:
+    """Defaults of every policy_node parameter (documented in the README)."""
+
+    policy_path: str = ""
+    output: str = "action"
+    rate_hz: float = 10.0
+    observation_timeout: float = 0.5
+    adapter: str = ""
+    adapter_kwargs: str = "{}"
+    cmd_vel_scale: float = 1.0
+
+    @staticmethod
+    def names() -> List[str]:
+        return [f.name for f in fields(PolicyNodeParams)]
+
+    def kwargs(self) -> Dict[str, Any]:
+        """``adapter_kwargs`` parsed (validated beforehand)."""
+        return yaml.safe_load(self.adapter_kwargs or "{}") or {}
+
+
+def validate_policy_node(name: str, value: Any) -> Optional[str]:
+    """Why ``value`` is not acceptable for policy_node parameter ``name`` (None when it is)."""
+    expected = {f.name: f.type for f in fields(PolicyNodeParams)}
+    if name not in expected:
+        return f"unknown parameter {name!r}; known: {', '.join(PolicyNodeParams.names())}"
+    if expected[name] == "float" and not _is_number(value):
+        return f"{name} must be a finite number, got {value!r}"
+    if expected[name] == "str" and not isinstance(value, str):
+        return f"{name} must be a string, got {value!r}"
+    if name == "policy_path":
+        import os
+
+        if not value or not os.path.isfile(value):
+            return f"policy_path must name an existing file (an exported policy's .json or .onnx), got {value!r}"
+    if name == "output" and value not in POLICY_OUTPUTS:
+        return f"output must be one of {', '.join(POLICY_OUTPUTS)}, got {value!r}"
+    if name in ("rate_hz", "observation_timeout") and value <= 0:
+        return f"{name} must be > 0, got {value}"
+    if name == "adapter" and value and (value.count(":") != 1 or not all(value.split(":"))):
+        return f"adapter must be 'package.module:Class' (empty: the agents' observation topics), got {value!r}"
+    if name == "adapter_kwargs":
+        try:
+            parsed = yaml.safe_load(value or "{}")
+        except yaml.YAMLError as error:
+            return f"adapter_kwargs must be a JSON/YAML-flow object: {error}"
+        if not isinstance(parsed, dict):
+            return f"adapter_kwargs must be a mapping, got {type(parsed).__name__}"
+    return None

@@ -6,11 +6,16 @@ messages for one chosen env of the batch (``env_index``):
 publishes  <agent>/pose (PoseStamped), <agent>/odom (Odometry), <agent>/scan
            (LaserScan per lidar), agents/poses and landmarks/poses (PoseArray),
            world/markers (MarkerArray), /clock, and /tf where tf2_msgs exists;
-subscribes <agent>/cmd_vel (Twist, or TwistStamped), body frame per REP 103;
+           <agent>/observation and <agent>/reward for learned policies (policy_io.py);
+subscribes <agent>/cmd_vel (Twist, or TwistStamped), body frame per REP 103,
+           and <agent>/action (the raw action vector);
 services   ~/reset (Trigger), ~/pause (SetBool), ~/step (Trigger).
 
 All stamps are simulation time, which advances by the world's dt per step.
-No physics lives here: this file converts tensors to messages and back.
+No physics lives here: this file converts tensors to messages and back. The
+per-step state topics are filled in bulk as pre-serialised bytes (publish.py),
+every lidar is cast once per step in one batch (lidar_batch.py), and unpaced
+(real_time_factor 0) the node runs several steps per timer callback.
 """
 from __future__ import annotations
 
@@ -18,25 +23,23 @@ import sys
 import time
 from typing import Dict, List, Optional
 
-import rclpy
 import torch
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 import vmas_ros
 from vmas_ros.ros import convert
 from vmas_ros.ros.command import command_to_action
+from vmas_ros.ros.lifecycle import ConfigError, run_node
 from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, validate
+from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
+from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
 from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.sensors import Lidar
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseArray, PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import Odometry
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import LaserScan
+from geometry_msgs.msg import Twist, TwistStamped
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -48,6 +51,8 @@ except ImportError:  # pragma: no cover - depends on the installation
     TFMessage = None
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: unpaced (real_time_factor 0, rate_hz 0): wall seconds of steps per timer callback
+UNPACED_BATCH_S = 0.002
 #: a best-effort subscriber accepts reliable and best-effort publishers alike
 ACCEPT_ANY = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 
@@ -56,10 +61,6 @@ def _type_name(message) -> str:
     """``pkg/msg/Name`` of a message instance (e.g. sensor_msgs/msg/LaserScan)."""
     module = type(message).__module__.split(".")[0]
     return f"{module}/msg/{type(message).__name__}"
-
-
-class ConfigError(ValueError):
-    """Start-up parameters were refused; the message says which and why."""
 
 
 def _stamp(nanoseconds: int) -> Time:
@@ -102,8 +103,9 @@ class SimNode(Node):
         values = {name: self.get_parameter(name).value for name in SimParams.names()}
         errors = [error for name in SimParams.names() if (error := validate(name, values[name]))]
         params = SimParams(**values) if not errors else None
-        if params is not None and (error := validate("env_index", params.env_index, params)):
-            errors.append(error)
+        for name in ("env_index", "control") if params is not None else ():
+            if error := validate(name, getattr(params, name), params):
+                errors.append(error)
         if errors:
             raise ConfigError("; ".join(errors))
         return params
@@ -124,6 +126,7 @@ class SimNode(Node):
                 self._timer = self.create_timer(self.params.step_period(self.env.world.dt), self._tick)
             if parameter.name == "env_index":
                 self._commands.clear()
+                self.agent_topics.clear()
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------------ building
@@ -155,43 +158,44 @@ class SimNode(Node):
         self.lidars = convert.agent_lidars(world)
         self.scan_geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in self.lidars.items()}
         frame = self.params.frame_id
-        self.pose_msgs, self.odom_msgs, self.scan_msgs = [], [], {}
-        self.pose_pubs, self.odom_pubs, self.scan_pubs = [], [], {}
         for i, name in enumerate(self.agent_names):
-            pose, odom = PoseStamped(), Odometry()
-            pose.header.frame_id = odom.header.frame_id = frame
-            odom.child_frame_id = f"{name}/base_link"
-            self.pose_msgs.append(pose)
-            self.odom_msgs.append(odom)
-            self.pose_pubs.append(self.create_publisher(PoseStamped, f"{name}/pose", RELIABLE))
-            self.odom_pubs.append(self.create_publisher(Odometry, f"{name}/odom", RELIABLE))
-            for k, _ in enumerate(self.lidars.get(i, [])):
-                topic = f"{name}/scan" if k == 0 else f"{name}/scan_{k}"
-                scan = LaserScan()
-                scan.header.frame_id = f"{name}/base_link"
-                self.scan_msgs[(i, k)] = scan
-                self.scan_pubs[(i, k)] = self.create_publisher(LaserScan, topic, RELIABLE)
             cmd_type = TwistStamped if self.params.use_stamped_cmd_vel else Twist
             self.create_subscription(cmd_type, f"{name}/cmd_vel", lambda msg, i=i: self._on_cmd_vel(i, msg), ACCEPT_ANY)
-        self.agent_array, self.landmark_array = PoseArray(), PoseArray()
-        self.agent_array.header.frame_id = self.landmark_array.header.frame_id = frame
-        self.agent_array_pub = self.create_publisher(PoseArray, "agents/poses", RELIABLE)
-        self.landmark_array_pub = self.create_publisher(PoseArray, "landmarks/poses", RELIABLE)
         self.markers = MarkerArray()
         for k, entity in enumerate(world.entities):
             marker = Marker()
             convert.shape_marker(marker, entity, k, frame)
             self.markers.markers.append(marker)
-        self.marker_pub = self.create_publisher(MarkerArray, "world/markers", RELIABLE)
+        # poses, odometry, scans, pose arrays, markers and /clock: pre-serialised, filled in bulk (publish.py)
+        self.state_messages = StateMessages(
+            self.agent_names, len(world.landmarks), len(world.entities), self.scan_geometry,
+            {i: [s.n_rays for s in ls] for i, ls in self.lidars.items()}, frame, self.markers)
         self._per_env_colours = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
-        self.clock_pub = self.create_publisher(Clock, "/clock", RELIABLE)
-        self.clock = Clock()
+        if self._per_env_colours:
+            self.state_messages.set_colour_fields(self._per_env_colours)
+        self.state_pub = StatePublisher(self, self.state_messages, RELIABLE)
+        self.lidar_readings = LidarReadings(self.lidars)
+        self.phases: Optional[StepPhases] = None  # set by `vmas-ros bench node` to time each part of a step
         self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
         if self.tf_pub is None:
             self.get_logger().info("tf2_msgs is not installed: /tf is not published (poses and odometry are)")
+        self.agent_topics = AgentTopics(self, self.env, self.agent_names, RELIABLE, ACCEPT_ANY, self._send,
+                                        on_action=self._record_received)
+        self.learned = self._load_policy()
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
+
+    def _load_policy(self):
+        try:
+            return start_policy(self.get_logger(), self.params, self.env, self.agent_names)
+        except (ValueError, ImportError) as error:
+            raise ConfigError(f"policy_path: {error}") from None
+
+    def _record_received(self, topic: str, msg) -> None:
+        if self.recorder is not None:  # the bag keeps every command, whichever way it came
+            with self.recorder.batch():
+                self._record(topic, msg, qos="best_effort")
 
     def _start_foxglove(self):
         """The live Foxglove server, when ``foxglove_port`` is set (0: off)."""
@@ -242,11 +246,10 @@ class SimNode(Node):
     def _on_foxglove_twist(self, agent_index: int, vx: float, vy: float, wz: float) -> None:
         # runs on the Foxglove server's thread: one dict assignment, read by the step
         self._commands[agent_index] = (vx, vy, wz, time.monotonic())
-        if self.recorder is not None:  # the bag keeps every command, whichever way it came
+        if self.recorder is not None:
             twist = Twist()
             twist.linear.x, twist.linear.y, twist.angular.z = vx, vy, wz
-            with self.recorder.batch():
-                self._record(f"{self.agent_names[agent_index]}/cmd_vel", twist, qos="best_effort")
+            self._record_received(f"{self.agent_names[agent_index]}/cmd_vel", twist)
 
     def destroy_node(self):
         if getattr(self, "foxglove", None) is not None:
@@ -268,14 +271,14 @@ class SimNode(Node):
                 )
             return
         self._commands[agent_index] = (*values, time.monotonic())
-        if self.recorder is not None:
-            with self.recorder.batch():
-                self._record(f"{self.agent_names[agent_index]}/cmd_vel", msg, qos="best_effort")
+        self._record_received(f"{self.agent_names[agent_index]}/cmd_vel", msg)
 
     def _actions(self) -> List[torch.Tensor]:
         env, p = self.env, self.params
         if p.control == "heuristic":
             actions = [self.policy.compute_action(o, u_range=a.u_range) for o, a in zip(self.obs, env.agents)]
+        elif p.control == "policy":
+            actions = policy_actions(self.learned, self.obs, self.agent_topics.bounds)
         else:
             actions = [torch.zeros(env.num_envs, env.get_agent_action_size(a), device=env.device) for a in env.agents]
         now = time.monotonic()
@@ -290,18 +293,34 @@ class SimNode(Node):
             row = command_to_action(agent, env.world, p.env_index, (vx, vy), wz)
             actions[i] = actions[i].clone()
             actions[i][p.env_index, : row.numel()] = row
-        return actions
+        return self.agent_topics.apply(actions, p.env_index, p.cmd_vel_timeout, self._commands)
 
     # ---------------------------------------------------------------------- step
     def _tick(self) -> None:
         if not self.context.ok():  # shutting down (SIGINT/SIGTERM): publish nothing more
             return
-        if not self.paused:
-            self.step_once()
+        if self.paused:
+            return
+        self.step_once()
+        if self._timer.timer_period_ns == 0:
+            # unpaced: one executor round costs about as much as a whole step, so keep stepping for
+            # up to UNPACED_BATCH_S of wall time; commands and services wait at most that long
+            end = time.perf_counter() + UNPACED_BATCH_S
+            while time.perf_counter() < end and not self.paused and self.context.ok():
+                self.step_once()
 
     def step_once(self) -> None:
-        self.obs, self.rewards, _, _ = self.env.step(self._actions())
+        phases = self.phases
+        start = time.perf_counter() if phases is not None else 0.0
+        actions = self._actions()
+        if phases is not None:
+            phases.add("actions", start)
+            start = time.perf_counter()
+        self.lidar_readings.mark()  # a reading the scenario takes during the step is reused, not cast again
+        self.obs, self.rewards, _, _ = self.env.step(actions)
         self.steps += 1
+        if phases is not None:
+            phases.add("engine", start)
         self._publish()
 
     def _publish(self) -> None:
@@ -311,8 +330,11 @@ class SimNode(Node):
             # the whole step goes into the bag at once (signals deferred meanwhile), so a
             # SIGINT/SIGTERM that interrupts publishing never leaves half a step in the bag
             with self.recorder.batch():
-                for topic, message in self._step_records:
-                    self._record(topic, message)
+                for topic, kind, payload in self._step_records:
+                    if isinstance(payload, bytes):  # the pre-serialised state messages
+                        self.recorder.write_raw(topic, kind, payload, self.sim_time_ns)
+                    else:
+                        self._record(topic, payload)
                 if self._tf_bytes is not None:
                     from vmas_ros.record import TF_MESSAGE_TYPE
 
@@ -321,76 +343,61 @@ class SimNode(Node):
     def _send(self, publisher, message) -> None:
         publisher.publish(message)
         if self.recorder is not None:
-            self._step_records.append((publisher.topic_name, message))
+            self._step_records.append((publisher.topic_name, _type_name(message), message))
+
+    def _record_payload(self, topic: str, kind: str, payload: bytes) -> None:
+        self._step_records.append((topic, kind, payload))
 
     def _publish_all(self) -> None:
-        p = self.params
-        stamp = _stamp(self.sim_time_ns)
-        self.clock.clock = stamp
-        self._send(self.clock_pub, self.clock)
-        snap = convert.Snapshot.take(self.env.world, p.env_index, self.lidars)
-        n_landmarks = len(self.env.world.landmarks)
-        transforms = []
-        for i, name in enumerate(self.agent_names):
-            k = n_landmarks + i
-            x, y, yaw = snap.pos[k, 0], snap.pos[k, 1], snap.rot[k]
-            pose, odom = self.pose_msgs[i], self.odom_msgs[i]
-            pose.header.stamp = odom.header.stamp = stamp
-            convert.set_pose(pose.pose, x, y, yaw)
-            convert.fill_odometry(odom, x, y, yaw, snap.vel[k, 0], snap.vel[k, 1], snap.ang_vel[k])
-            self._send(self.pose_pubs[i], pose)
-            self._send(self.odom_pubs[i], odom)
-            for j, ranges in enumerate(snap.scans.get(i, [])):
-                scan = self.scan_msgs[(i, j)]
-                scan.header.stamp = stamp
-                convert.fill_scan(scan, self.scan_geometry[i][j], ranges)
-                self._send(self.scan_pubs[(i, j)], scan)
-            if self.tf_pub is not None or self.recorder is not None:
-                tf = TransformStamped()
-                tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, p.frame_id, f"{name}/base_link"
-                tf.transform.translation.x, tf.transform.translation.y = float(x), float(y)
-                q = convert.yaw_to_quaternion(float(yaw))
-                r = tf.transform.rotation
-                r.x, r.y, r.z, r.w = q
-                transforms.append(tf)
-        self._tf_bytes = None
-        if transforms and self.tf_pub is not None:
-            self._send(self.tf_pub, TFMessage(transforms=transforms))
-        elif transforms and self.recorder is not None:
-            # no tf2_msgs here: the bag still gets /tf, serialised from the message definition
-            from vmas_ros.record import serialize_tf_message
-
-            self._tf_bytes = serialize_tf_message(transforms)
-        self._publish_arrays(snap, stamp, n_landmarks)
+        p, phases = self.params, self.phases
+        world = self.env.world
+        start = time.perf_counter() if phases is not None else 0.0
+        readings = self.lidar_readings.take(world)
+        if phases is not None:
+            phases.add("lidar", start)
+            start = time.perf_counter()
+        snap = convert.Snapshot.take(world, p.env_index, self.lidars, readings)
+        colours = None
+        if self._per_env_colours:  # e.g. goal colours drawn per env at reset
+            colours = [c for k in self._per_env_colours for c in convert.rgb(world.entities[k].color, p.env_index)]
+        self.state_messages.fill(snap, self.sim_time_ns, colours)
+        if phases is not None:
+            phases.add("convert", start)
+            start = time.perf_counter()
+        self.state_pub.publish(self._record_payload if self.recorder is not None else None)
+        self._publish_tf(snap)
+        self.agent_topics.publish(self.obs, self.rewards, p.env_index, always=self.recorder is not None)
         if self.foxglove is not None:
-            world = self.env.world
             self.foxglove.publish(snap, world.entities, self.scan_geometry, self.sim_time_ns, env_index=p.env_index)
             if self.rewards is not None:
                 values = {name: float(r[p.env_index]) for name, r in zip(self.agent_names, self.rewards)}
                 values["total"] = sum(values.values())
                 self.foxglove.log_json("/rewards", values, self.sim_time_ns)
+        if phases is not None:
+            phases.add("publish", start)
+            phases.steps += 1
 
-    def _publish_arrays(self, snap, stamp, n_landmarks: int) -> None:
-        from geometry_msgs.msg import Pose
+    def _publish_tf(self, snap) -> None:
+        """/tf where tf2_msgs exists; without it, only the bag gets /tf (serialised from its definition)."""
+        self._tf_bytes = None
+        if self.tf_pub is None and self.recorder is None:
+            return
+        stamp, n_landmarks = _stamp(self.sim_time_ns), len(self.env.world.landmarks)
+        transforms = []
+        for i, name in enumerate(self.agent_names):
+            x, y, yaw = snap.pos[n_landmarks + i, 0], snap.pos[n_landmarks + i, 1], snap.rot[n_landmarks + i]
+            tf = TransformStamped()
+            tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, self.params.frame_id, f"{name}/base_link"
+            tf.transform.translation.x, tf.transform.translation.y = float(x), float(y)
+            r = tf.transform.rotation
+            r.x, r.y, r.z, r.w = convert.yaw_to_quaternion(float(yaw))
+            transforms.append(tf)
+        if transforms and self.tf_pub is not None:
+            self._send(self.tf_pub, TFMessage(transforms=transforms))
+        elif transforms:
+            from vmas_ros.record import serialize_tf_message
 
-        for array, rows, pub in (
-            (self.agent_array, range(n_landmarks, len(snap.pos)), self.agent_array_pub),
-            (self.landmark_array, range(n_landmarks), self.landmark_array_pub),
-        ):
-            if len(array.poses) != len(rows):
-                array.poses = [Pose() for _ in rows]
-            for pose, k in zip(array.poses, rows):
-                convert.set_pose(pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
-            array.header.stamp = stamp
-            self._send(pub, array)
-        entities = self.env.world.entities
-        for k in self._per_env_colours:  # e.g. goal colours drawn per env at reset
-            colour = self.markers.markers[k].color
-            colour.r, colour.g, colour.b = convert.rgb(entities[k].color, self.params.env_index)
-        for k, marker in enumerate(self.markers.markers):
-            marker.header.stamp = stamp
-            convert.set_pose(marker.pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
-        self._send(self.marker_pub, self.markers)
+            self._tf_bytes = serialize_tf_message(transforms)
 
     @property
     def sim_time_ns(self) -> int:
@@ -399,8 +406,10 @@ class SimNode(Node):
 
     # ------------------------------------------------------------------ services
     def _on_reset(self, request, response):
-        self.obs = self.env.reset()
+        self.lidar_readings.mark()
+        self.obs, self.rewards = self.env.reset(), None  # no reward until the next step
         self._commands.clear()
+        self.agent_topics.clear()
         self._publish()
         response.success, response.message = True, f"reset {self.env.num_envs} envs"
         return response
@@ -421,26 +430,7 @@ class SimNode(Node):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of ``ros2 run vmas_ros sim_node`` (and ``sim_node`` on PATH)."""
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = None
-    code = 0
-    try:
-        node = SimNode()
-        rclpy.spin(node)
-    except ConfigError as error:
-        print(f"sim_node: refused parameters: {error}", file=sys.stderr)
-        code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        code = 0
-    except Exception:
-        if rclpy.ok():
-            raise
-        code = 0  # a callback raced the shutdown a signal started: still a clean exit
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node("sim_node", SimNode, argv)
 
 
 if __name__ == "__main__":

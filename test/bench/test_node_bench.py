@@ -1,0 +1,64 @@
+"""``vmas-ros bench node``: a real run (sim_node in-process, a subscriber process) at a tiny
+duration, through the command line. Benchmarks are measurements: nothing here asserts on speed,
+only that the run happened as documented and its files say so."""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+
+import pytest
+
+from vmas_ros.bench import cli as bench_cli
+from vmas_ros.bench.node import NODE_COLUMNS
+
+pytestmark = pytest.mark.ros
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(prog="vmas-ros bench")
+    bench_cli.add_bench_arguments(parser)
+    return parser.parse_args(argv)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("node_bench")
+    argv = ["node", "--duration", "0.5", "--repeats", "2", "--warmup", "0", "--no-progress", "--out", str(out),
+            "--scenario-kwargs", '{"n_agents": 2}', "--lidar-rays", "8"]
+    code = bench_cli.run_bench_command(_parse(argv))
+    return code, out, json.loads((out / "node_benchmark.json").read_text())
+
+
+def test_writes_csv_json_and_table(run):
+    code, out, document = run
+    assert code == 0
+    with open(out / "node_benchmark.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert list(rows[0]) == NODE_COLUMNS and len(rows) == 2
+    assert all(int(r["steps"]) > 0 and float(r["steps_per_s"]) > 0 for r in rows)
+    assert "steps/s" in (out / "node_benchmark.md").read_text()
+    assert document["machine"]["torch"] and len(document["rows"]) == 2
+
+
+def test_the_subscriber_process_received_the_core_topics(run):
+    _, _, document = run
+    summary = document["summary"]
+    expected = {"/clock"} | {f"/agent_{i}/{leaf}" for i in range(2) for leaf in ("pose", "odom", "scan")}
+    assert set(summary["topics"]) == expected
+    received = summary["received_by_topic"]
+    assert set(received) == expected and all(received[t] > 0 for t in expected)
+    assert 0 < summary["messages_received"] <= summary["messages_published"]
+
+
+def test_the_breakdown_covers_the_step(run):
+    _, _, document = run
+    for row in document["rows"]:
+        parts = sum(row[f"{name}_us"] for name in ("actions", "engine", "lidar", "convert", "publish"))
+        assert row["engine_us"] > 0 and row["lidar_us"] > 0 and row["publish_us"] > 0
+        assert parts + row["executor_us"] == pytest.approx(row["wall_us"])
+
+
+def test_bad_options_exit_2(tmp_path, capsys):
+    code = bench_cli.run_bench_command(_parse(["node", "--duration", "0", "--out", str(tmp_path)]))
+    assert code == 2 and "duration" in capsys.readouterr().err

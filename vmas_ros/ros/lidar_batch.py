@@ -1,0 +1,127 @@
+"""Every agent's lidar in one batched ray cast, equal to each ``Lidar.measure()``.
+
+``Lidar.measure`` casts one agent's rays against its targets: with four agents
+that is four rounds of the same dozen small tensor ops, and at one env each op
+is pure overhead (~40-90 us a round here). sim_node needs every lidar every
+step, so it casts them together: rays ``[L, B, R]`` of all L lidars against the
+union of their targets ``[E, ...]``, each lidar's non-targets masked out before
+the nearest hit is taken. The intersection functions are the engine's own
+(``vmas_ros.simulator.raycast``), elementwise, so every (lidar, target, ray)
+distance is the same number ``measure`` computes.
+
+Exactness needs care only with trigonometry, whose vectorised and scalar kernels
+may differ in the last bit: the ray directions are computed per lidar on the
+same ``[B, R]`` tensors as ``measure`` does, and box/line headings only when
+every lidar has the same targets of that kind (the same stacked tensor as in
+``measure``). Lidars that do not fit (another ray count or range, or differing
+box/line targets) are measured one by one. test/ros/test_publish.py compares the
+two bit for bit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import torch
+
+from vmas_ros.simulator import raycast
+
+
+def _targets(world, sensor) -> list:
+    """The entities ``sensor``'s rays can hit, as ``World.cast_rays`` selects them."""
+    owner = sensor.agent
+    return [e for e in world.entities if e is not owner and sensor.entity_filter(e)]
+
+
+@dataclass
+class _Group:
+    """One shape kind of a batched cast: the union of the lidars' targets and their constants."""
+
+    kind: str
+    union: list
+    mask: torch.Tensor  # [E, L, 1, 1]: is entity e a target of lidar l
+    sizes: Tuple[torch.Tensor, ...]  # radius, or length (and width), each [E, 1, 1, 1]
+
+
+class BatchedLidars:
+    """Casts several lidars at once; the per-target-set constants are built once and cached.
+
+    Entity filters are evaluated every step (they may depend on state); only a
+    new set of targets builds (and validates) a new plan.
+    """
+
+    def __init__(self) -> None:
+        self._plans: Dict[tuple, Optional[List[_Group]]] = {}
+
+    def _plan(self, world, sensors, targets) -> Optional[List[_Group]]:
+        for sensor, found in zip(sensors, targets):
+            owner = sensor.agent
+            for e in found:
+                if not (e.collides(owner) and owner.collides(e)):
+                    raise ValueError(f"rays are cast only among collidable entities: {owner.name!r} and "
+                                     f"{e.name!r} do not collide")
+        device = sensors[0].agent.state.pos.device
+        groups = []
+        for kind in ("box", "sphere", "line"):
+            per_lidar = [[e for e in t if e.shape.kind == kind] for t in targets]
+            ids = [[id(e) for e in g] for g in per_lidar]
+            if kind != "sphere" and any(g and g != ids[0] for g in ids):
+                return None  # headings would be stacked differently from measure(): not provably equal
+            members = [set(g) for g in ids]
+            union = [e for e in world.entities if any(id(e) in m for m in members)]
+            if not union:
+                continue
+            mask = torch.tensor([[id(e) in m for m in members] for e in union], device=device)
+            column = lambda values: torch.tensor(values, device=device).view(-1, 1, 1, 1)  # noqa: E731
+            if kind == "sphere":
+                sizes = (column([e.shape.radius for e in union]),)
+            elif kind == "box":
+                sizes = (column([e.shape.length for e in union]), column([e.shape.width for e in union]))
+            else:
+                sizes = (column([e.shape.length for e in union]),)
+            groups.append(_Group(kind, union, mask.view(len(union), len(sensors), 1, 1), sizes))
+        return groups
+
+    def cast(self, world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
+        """Readings ``[B, R]`` of ``sensors`` (same ray count and range) from one cast; None when not batchable."""
+        if len(sensors) < 2:
+            return None
+        n_rays, max_range = sensors[0].n_rays, float(sensors[0].max_range)
+        if any(s.n_rays != n_rays or float(s.max_range) != max_range for s in sensors):
+            return None
+        targets = [_targets(world, s) for s in sensors]
+        key = (tuple(id(s) for s in sensors), tuple(tuple(id(e) for e in t) for t in targets))
+        if key not in self._plans:
+            self._plans[key] = self._plan(world, sensors, targets)
+        groups = self._plans[key]
+        if groups is None:
+            return None
+        with torch.no_grad():
+            # per lidar, exactly measure()'s angles, cosines and sines
+            angles = [s.angles + s.agent.state.rot for s in sensors]
+            cos_a = torch.stack([torch.cos(a) for a in angles]).unsqueeze(0)  # [1, L, B, R]
+            sin_a = torch.stack([torch.sin(a) for a in angles]).unsqueeze(0)
+            origin = torch.stack([s.agent.state.pos for s in sensors]).unsqueeze(0)  # [1, L, B, 2]
+            ox, oy = origin[..., 0:1], origin[..., 1:2]  # [1, L, B, 1]
+            nearest = torch.full_like(cos_a[0], max_range)  # [L, B, R]
+            for group in groups:
+                pos = torch.stack([e.state.pos for e in group.union]).unsqueeze(1)  # [E, 1, B, 2]
+                cx, cy = pos[..., 0:1], pos[..., 1:2]
+                if group.kind == "sphere":
+                    d = raycast.ray_sphere_xy(ox, oy, cos_a, sin_a, cx, cy, group.sizes[0], max_range)
+                else:
+                    rot = torch.stack([e.state.rot for e in group.union])  # [E, B, 1], as measure() stacks it
+                    cos_r, sin_r = torch.cos(rot).unsqueeze(1), torch.sin(rot).unsqueeze(1)
+                    if group.kind == "box":
+                        d = raycast.ray_box_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, *group.sizes, max_range)
+                    else:
+                        d = raycast.ray_segment_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, group.sizes[0],
+                                                   max_range)
+                d = torch.where(group.mask, d, float("inf"))
+                nearest = torch.minimum(nearest, d.amin(dim=0))
+        return list(nearest.unbind(0))
+
+
+def cast_together(world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
+    """One-off :meth:`BatchedLidars.cast` (no plan cache kept)."""
+    return BatchedLidars().cast(world, sensors)

@@ -1,0 +1,352 @@
+"""sim_node's per-step state topics, converted in bulk and published as pre-serialised bytes.
+
+Why bytes: filling an rclpy message field by field costs about a microsecond per
+field in Python, and ``publish(msg)`` then converts the whole object to C again
+(a MarkerArray of eight markers: ~140 us per publish). Yet from one step to the
+next only numbers change: frame ids, marker shapes and array lengths stay put,
+so the serialised (CDR) layout of every message is fixed once the node is built.
+
+So each message is serialised once from a prototype, and the byte offsets of
+the fields that change (stamps, positions, quaternions, body twists, scan
+ranges, per-env colours) are found by writing unique sentinel values into the
+prototype and searching the bytes for them (no hand-written CDR layout; a
+sentinel that is not found exactly once refuses the build). All messages live
+back to back in one byte arena; a step writes every changed number with four
+numpy scatters, then publishes each message's slice with ``publish(bytes)``.
+What subscribers and bags receive is byte-for-byte what ``publish(msg)`` of the
+same values would send (test/ros/test_publish.py checks it against the per-field
+conversion of ``convert``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from rclpy.serialization import serialize_message
+
+from vmas_ros.ros import convert
+
+
+def type_name(message_type) -> str:
+    """``pkg/msg/Name`` of a message class (e.g. sensor_msgs/msg/LaserScan)."""
+    return f"{message_type.__module__.split('.')[0]}/msg/{message_type.__name__}"
+
+
+def _resolve(message, path: str) -> Tuple[object, str]:
+    """(owner object, attribute name) of a dotted field path such as ``pose.position.x``."""
+    *parents, name = path.split(".")
+    owner = message
+    for part in parents:
+        owner = owner[int(part)] if part.isdigit() else getattr(owner, part)
+    return owner, name
+
+
+@dataclass
+class _Template:
+    """One message: its prototype, where it sits in the arena and which fields a step rewrites."""
+
+    topic: str
+    message: object
+    f64: List[Tuple[str, int]] = field(default_factory=list)  # (field path, index into the float64 values)
+    f32: List[Tuple[str, int]] = field(default_factory=list)  # (field path, index into the float32 values)
+    arrays: List[Tuple[str, int, int]] = field(default_factory=list)  # (path, start, length) in the ranges
+    stamps: List[str] = field(default_factory=list)  # paths of builtin_interfaces/Time fields
+
+
+class StateMessages:
+    """Poses, odometry, scans, pose arrays, markers and /clock of one env, as CDR bytes per step.
+
+    ``fill(snap, stamp_ns, colours)`` rewrites the arena from a ``convert.Snapshot``;
+    ``payloads()`` then yields ``(topic, type name, bytes)`` per message in a fixed
+    order. Values go in as ``convert`` computes them (float32 arithmetic where it
+    uses float32, ``math`` for trigonometry), so the bytes equal the per-field path.
+    """
+
+    def __init__(self, agent_names: Sequence[str], n_landmarks: int, n_entities: int,
+                 scan_geometry: Dict[int, List[convert.ScanGeometry]], scan_rays: Dict[int, List[int]],
+                 frame_id: str, markers) -> None:
+        from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+        from nav_msgs.msg import Odometry
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import LaserScan
+
+        self.n_landmarks, self.n_entities = n_landmarks, n_entities
+        n_agents = len(agent_names)
+        self._twist_base = 4 * n_entities  # float64 values: entity (x, y, qz, qw), then agent body (vx, vy, wz)
+        templates: List[_Template] = []
+        clock = _Template("/clock", Clock(), stamps=["clock"])
+        templates.append(clock)
+        scans: List[Tuple[int, int]] = []  # (agent, lidar) in ranges order
+        self.scan_max: List[np.ndarray] = []
+        ranges_offset = 0
+        for i, name in enumerate(agent_names):
+            k = n_landmarks + i
+            pose = _Template(f"{name}/pose", PoseStamped(), stamps=["header.stamp"])
+            pose.message.header.frame_id = frame_id
+            pose.f64 = self._pose_fields("pose", k)
+            odom = _Template(f"{name}/odom", Odometry(), stamps=["header.stamp"])
+            odom.message.header.frame_id, odom.message.child_frame_id = frame_id, f"{name}/base_link"
+            t = self._twist_base + 3 * i
+            odom.f64 = self._pose_fields("pose.pose", k) + [
+                ("twist.twist.linear.x", t), ("twist.twist.linear.y", t + 1), ("twist.twist.angular.z", t + 2)]
+            templates += [pose, odom]
+            for j, geometry in enumerate(scan_geometry.get(i, [])):
+                topic = f"{name}/scan" if j == 0 else f"{name}/scan_{j}"
+                scan = _Template(topic, LaserScan(), stamps=["header.stamp"])
+                convert.fill_scan(scan.message, geometry, np.zeros(0, np.float32))
+                scan.message.header.frame_id = f"{name}/base_link"
+                n_rays = scan_rays[i][j]
+                scan.arrays = [("ranges", ranges_offset, n_rays)]
+                ranges_offset += n_rays
+                self.scan_max.append(np.full(n_rays, geometry.range_max, dtype=np.float32))
+                scans.append((i, j))
+                templates.append(scan)
+        self.scan_order = scans
+        self.n_ranges = ranges_offset
+        for topic, rows in (("agents/poses", range(n_landmarks, n_entities)), ("landmarks/poses", range(n_landmarks))):
+            array = _Template(topic, PoseArray(), stamps=["header.stamp"])
+            array.message.header.frame_id = frame_id
+            array.message.poses = [Pose() for _ in rows]
+            for slot, k in enumerate(rows):
+                array.f64 += self._pose_fields(f"poses.{slot}", k)
+            templates.append(array)
+        marker_array = _Template("world/markers", markers)
+        for k in range(n_entities):
+            marker_array.stamps.append(f"markers.{k}.header.stamp")
+            marker_array.f64 += self._pose_fields(f"markers.{k}.pose", k)
+        templates.append(marker_array)
+        self._marker_template = marker_array
+        self.templates = templates
+        self.types = [type_name(type(t.message)) for t in templates]
+        self.topics = [t.topic for t in templates]
+        self._build()
+
+    @staticmethod
+    def _pose_fields(prefix: str, k: int) -> List[Tuple[str, int]]:
+        """A geometry_msgs/Pose's changing fields: x, y and the yaw quaternion's z, w (the rest stays 0)."""
+        return [(f"{prefix}.position.x", 4 * k), (f"{prefix}.position.y", 4 * k + 1),
+                (f"{prefix}.orientation.z", 4 * k + 2), (f"{prefix}.orientation.w", 4 * k + 3)]
+
+    def set_colour_fields(self, per_env: Sequence[int]) -> None:
+        """Entities whose colour is drawn per env: their marker colours are rewritten every step."""
+        self._marker_template.f32 = [
+            (f"markers.{k}.color.{c}", 3 * n + m) for n, k in enumerate(per_env) for m, c in enumerate("rgb")]
+        self._build()
+
+    # ------------------------------------------------------------------ layout
+    def _build(self) -> None:
+        """Serialise every prototype with sentinels in its changing fields and record their byte offsets."""
+        chunks: List[bytes] = []
+        idx64, src64, idx32, src32, idx_ranges, idx_stamp = [], [], [], [], [], []
+        offset, counter = 0, 0
+        self.spans: List[Tuple[int, int]] = []
+        for template in self.templates:
+            message = template.message
+            sentinels = []  # (packed bytes, kind, source)
+            for path, source in template.f64:
+                counter += 1
+                value = 1.0e6 + 0.0078125 * counter + 7.0e5 * (counter % 7)
+                owner, name = _resolve(message, path)
+                setattr(owner, name, value)
+                sentinels.append((np.float64(value).astype("<f8").tobytes(), 8, "f64", source))
+            for path, source in template.f32:
+                counter += 1
+                value = float(np.float32(3.0e4 + 0.25 * counter))
+                owner, name = _resolve(message, path)
+                setattr(owner, name, value)
+                sentinels.append((np.float32(value).astype("<f4").tobytes(), 4, "f32", source))
+            for path, start, length in template.arrays:
+                values = (5.0e4 + 0.5 * np.arange(counter, counter + length)).astype(np.float32)
+                counter += length
+                owner, name = _resolve(message, path)
+                setattr(owner, name, values.tolist())
+                sentinels.append((values.astype("<f4").tobytes(), 4 * length, "ranges", (start, length)))
+            for path in template.stamps:
+                counter += 1
+                owner, name = _resolve(message, path)
+                setattr(owner, name, Time(sec=1_100_000_000 + counter, nanosec=900_000_000 + counter))
+                packed = np.array([1_100_000_000 + counter, 900_000_000 + counter], "<u4").tobytes()
+                sentinels.append((packed, 8, "stamp", None))
+            data = serialize_message(message)
+            for packed, size, kind, source in sentinels:
+                at = data.find(packed)
+                if at < 0 or data.find(packed, at + 1) >= 0:
+                    raise RuntimeError(f"{template.topic}: a sentinel of {kind} was not found exactly once in the "
+                                       f"serialised message; cannot pre-serialise it")
+                rows = offset + at + np.arange(size)
+                if kind == "f64":
+                    idx64.append(rows), src64.append(source)
+                elif kind == "f32":
+                    idx32.append(rows), src32.append(source)
+                elif kind == "ranges":
+                    idx_ranges.append(rows)
+                else:
+                    idx_stamp.append(rows)
+            self.spans.append((offset, offset + len(data)))
+            chunks.append(data)
+            offset += len(data)
+        self.arena = np.frombuffer(b"".join(chunks), dtype=np.uint8).copy()
+        self._idx64 = np.array(idx64, dtype=np.intp).reshape(-1, 8)
+        self._src64 = np.array(src64, dtype=np.intp)
+        self._idx32 = np.array(idx32, dtype=np.intp).reshape(-1, 4)
+        self._src32 = np.array(src32, dtype=np.intp)
+        self._idx_ranges = np.concatenate(idx_ranges) if idx_ranges else np.zeros(0, np.intp)
+        self._idx_stamp = np.array(idx_stamp, dtype=np.intp).reshape(-1, 8)
+        self._scan_max = np.concatenate(self.scan_max) if self.scan_max else np.zeros(0, np.float32)
+        self._data = self.arena.tobytes()
+
+    # -------------------------------------------------------------------- step
+    def values(self, snap: convert.Snapshot) -> np.ndarray:
+        """The float64 values of a step: per entity (x, y, qz, qw), then per agent its body-frame twist.
+
+        Computed exactly as ``convert.set_pose``/``fill_odometry`` do: ``math`` trigonometry on the
+        float64 of each float32 angle, and the body twist in float32 arithmetic (NumPy 2's rule for a
+        float32 times a Python float), so the bytes match the per-message conversion bit for bit.
+        """
+        rot = snap.rot.tolist()
+        half = [y / 2.0 for y in rot]
+        out = np.empty(self._twist_base + 3 * (self.n_entities - self.n_landmarks), dtype=np.float64)
+        quarter = out[: self._twist_base].reshape(-1, 4)
+        quarter[:, 0:2] = snap.pos
+        quarter[:, 2] = [math.sin(h) for h in half]
+        quarter[:, 3] = [math.cos(h) for h in half]
+        agents = slice(self.n_landmarks, self.n_entities)
+        yaw = rot[agents]
+        c = np.array([math.cos(y) for y in yaw], dtype=np.float64).astype(np.float32)
+        s = np.array([math.sin(y) for y in yaw], dtype=np.float64).astype(np.float32)
+        vx, vy = snap.vel[agents, 0], snap.vel[agents, 1]
+        twist = out[self._twist_base:].reshape(-1, 3)
+        twist[:, 0] = vx * c + vy * s
+        twist[:, 1] = -vx * s + vy * c
+        twist[:, 2] = snap.ang_vel[agents]
+        return out
+
+    def ranges(self, snap: convert.Snapshot) -> np.ndarray:
+        """Every scan's ranges in publishing order, +inf where nothing was hit (REP 117), float32."""
+        if not self.scan_order:
+            return np.zeros(0, np.float32)
+        ranges = np.concatenate([snap.scans[i][j] for i, j in self.scan_order]).astype(np.float32, copy=False)
+        return np.where(ranges >= self._scan_max, np.float32(np.inf), ranges).astype(np.float32)
+
+    def fill(self, snap: convert.Snapshot, stamp_ns: int, colours: Optional[np.ndarray] = None) -> None:
+        """Write one step into the arena: four scatters, whatever the number of agents."""
+        arena = self.arena
+        arena[self._idx64] = self.values(snap)[self._src64].astype("<f8").view(np.uint8).reshape(-1, 8)
+        if self._idx_ranges.size:
+            arena[self._idx_ranges] = self.ranges(snap).astype("<f4").view(np.uint8)
+        if self._idx32.size and colours is not None:
+            arena[self._idx32] = np.asarray(colours, dtype="<f4")[self._src32].view(np.uint8).reshape(-1, 4)
+        stamp = np.array([stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000], dtype="<u4").view(np.uint8)
+        arena[self._idx_stamp] = stamp
+        self._data = arena.tobytes()
+
+    def payloads(self) -> List[Tuple[str, str, bytes]]:
+        """(topic as created, relative but /clock, type name, CDR bytes) of every message, in ``topics`` order."""
+        data = self._data
+        return [(topic, kind, data[a:b]) for topic, kind, (a, b) in zip(self.topics, self.types, self.spans)]
+
+    def payload(self, index: int) -> bytes:
+        a, b = self.spans[index]
+        return self._data[a:b]
+
+    def decode(self, topic: str):
+        """The message last filled for ``topic``, deserialised (for tests and tools; not used per step)."""
+        import importlib
+
+        from rclpy.serialization import deserialize_message
+
+        index = [t.lstrip("/") for t in self.topics].index(topic.lstrip("/"))
+        package, _, name = self.types[index].split("/")
+        return deserialize_message(self.payload(index), getattr(importlib.import_module(f"{package}.msg"), name))
+
+
+class StatePublisher:
+    """The publishers of ``StateMessages`` on a node; publishes a step's bytes and hands them to ``record``."""
+
+    def __init__(self, node, messages: StateMessages, qos) -> None:
+        from geometry_msgs.msg import PoseArray, PoseStamped
+        from nav_msgs.msg import Odometry
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import LaserScan
+        from visualization_msgs.msg import MarkerArray
+
+        classes = {type_name(c): c for c in (PoseArray, PoseStamped, Odometry, Clock, LaserScan, MarkerArray)}
+        self.messages = messages
+        self.publishers = [node.create_publisher(classes[kind], topic, qos)
+                           for topic, kind in zip(messages.topics, messages.types)]
+
+    def publish(self, record: Optional[Callable[[str, str, bytes], None]] = None) -> None:
+        """Publish the last ``fill``; ``record(resolved topic, type name, bytes)`` gets each message too."""
+        data, spans = self.messages._data, self.messages.spans
+        for publisher, (a, b) in zip(self.publishers, spans):
+            publisher.publish(data[a:b])
+        if record is not None:
+            for publisher, kind, (a, b) in zip(self.publishers, self.messages.types, spans):
+                record(publisher.topic_name, kind, data[a:b])
+
+
+class LidarReadings:
+    """This step's reading of every lidar, cast once per step.
+
+    A scenario that observes through a lidar (e.g. discovery, flocking) has already
+    cast its rays inside ``env.step``; measuring again to publish would double the
+    most expensive part of the node's step. ``mark()`` before a step or reset
+    remembers each lidar's last reading; ``take()`` afterwards reuses a reading that
+    is newer than the mark (observations and rewards are computed after the physics,
+    so it describes the new state) and measures the others.
+    """
+
+    def __init__(self, lidars: Dict[int, list]) -> None:
+        from vmas_ros.ros.lidar_batch import BatchedLidars
+
+        self.lidars = lidars
+        self._marks: Optional[Dict[int, list]] = None
+        self._batched = BatchedLidars()
+
+    def mark(self) -> None:
+        self._marks = {i: [s.last_measurement for s in sensors] for i, sensors in self.lidars.items()}
+
+    def take(self, world) -> Dict[int, list]:
+        """agent index -> this step's reading of each of its lidars; the stale ones cast in one batch."""
+        marks, self._marks = self._marks, None
+        readings: Dict[int, list] = {}
+        stale = []  # (agent, lidar index, sensor)
+        for i, sensors in self.lidars.items():
+            readings[i] = []
+            for j, sensor in enumerate(sensors):
+                last = sensor.last_measurement
+                fresh = marks is not None and last is not None and last is not marks[i][j]
+                readings[i].append(last if fresh else None)
+                if not fresh:
+                    stale.append((i, j, sensor))
+        groups: Dict[tuple, list] = {}  # lidars of one ray count and range are cast together
+        for entry in stale:
+            groups.setdefault((entry[2].n_rays, float(entry[2].max_range)), []).append(entry)
+        for group in groups.values():
+            batched = self._batched.cast(world, [s for _, _, s in group])
+            for k, (i, j, sensor) in enumerate(group):
+                readings[i][j] = batched[k] if batched is not None else sensor.measure()
+        return readings
+
+
+class StepPhases:
+    """Wall time of each part of sim_node's step, summed (``vmas-ros bench node`` reads it)."""
+
+    NAMES = ("actions", "engine", "lidar", "convert", "publish")
+
+    def __init__(self) -> None:
+        self.steps = 0
+        self.seconds: Dict[str, float] = {name: 0.0 for name in self.NAMES}
+
+    def add(self, name: str, since: float) -> None:
+        import time
+
+        self.seconds[name] += time.perf_counter() - since
+
+    def per_step_us(self, steps: Optional[int] = None) -> Dict[str, float]:
+        """Microseconds per step of each part (over ``steps``, default the steps that published)."""
+        steps = self.steps if steps is None else steps
+        return {name: 1e6 * s / max(1, steps) for name, s in self.seconds.items()}
