@@ -214,12 +214,17 @@ class SimProcess:
         self._stderr = open(self.stderr_path, "wb")
         self.started = time.monotonic()
         self.proc = subprocess.Popen(
-            sim_argv(self.params), cwd=REPO, env=sim_env(),
+            self.argv(self.params), cwd=REPO, env=sim_env(),
             stdin=subprocess.DEVNULL, stdout=self._stdout, stderr=self._stderr,
         )
         self.returncode: Optional[int] = None
 
     # ----------------------------------------------------------------- output
+    @staticmethod
+    def argv(params: Dict[str, object]) -> List[str]:
+        """The command line of the node this class runs (subclasses run other nodes)."""
+        return sim_argv(params)
+
     def stdout(self) -> str:  # the child writes through its own descriptors: nothing to flush here
         return self.stdout_path.read_text(errors="replace")
 

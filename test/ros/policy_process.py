@@ -5,13 +5,10 @@ exit-code check on leaving the ``with`` block), another module to run.
 """
 from __future__ import annotations
 
-import subprocess
 import sys
-import time
-from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List
 
-from test.ros.conftest import REPO, Ros, SimProcess, format_param, sim_env
+from test.ros.conftest import SimProcess, format_param
 
 
 def policy_argv(params: Dict[str, object]) -> List[str]:
@@ -24,19 +21,9 @@ def policy_argv(params: Dict[str, object]) -> List[str]:
 class PolicyProcess(SimProcess):
     """One ``policy_node`` process (stdout/stderr in ``log_dir``)."""
 
-    def __init__(self, ros: Optional[Ros], params: Dict[str, object], log_dir: Path, label: str) -> None:
-        self.ros, self.params = ros, dict(params)
-        log_dir.mkdir(parents=True, exist_ok=True)
-        self.stdout_path = log_dir / f"{label}.stdout.log"
-        self.stderr_path = log_dir / f"{label}.stderr.log"
-        self._stdout = open(self.stdout_path, "wb")
-        self._stderr = open(self.stderr_path, "wb")
-        self.started = time.monotonic()
-        self.proc = subprocess.Popen(
-            policy_argv(self.params), cwd=REPO, env=sim_env(),
-            stdin=subprocess.DEVNULL, stdout=self._stdout, stderr=self._stderr,
-        )
-        self.returncode: Optional[int] = None
+    @staticmethod
+    def argv(params: Dict[str, object]) -> List[str]:
+        return policy_argv(params)
 
     def describe(self) -> str:
         return "policy_node" + super().describe().removeprefix("sim_node")

@@ -29,7 +29,7 @@ def check_render_mode(render_mode: Optional[str]) -> Optional[str]:
     return render_mode
 
 
-class GymnasiumEnv(gymnasium.Env):
+class GymnasiumEnv(common.SingleEnvWrapper, gymnasium.Env):
     """A single-env :class:`Environment` (``num_envs=1``) behind gymnasium's ``Env`` API.
 
     Args:
@@ -92,12 +92,4 @@ class GymnasiumEnv(gymnasium.Env):
             reward = common.pack({name: r[0] for name, r in rewards.items()}, self.env.dict_spaces)
         return self._observation(obs), reward, bool(terminated[0]), bool(truncated[0]), self._info(infos)
 
-    def render(self) -> Optional[np.ndarray]:
-        """The frame as an HxWx3 uint8 array (None when made with ``render_mode=None``)."""
-        if self.render_mode is None:
-            return None
-        return self.env.render(mode="rgb_array", env_index=0)
-
-    def close(self) -> None:
-        self.env.close()
 

@@ -21,7 +21,7 @@ from vmas_ros.envs.gymnasium_env import RENDER_MODES, check_render_mode
 __all__ = ["PettingZooEnv"]
 
 
-class PettingZooEnv(ParallelEnv):
+class PettingZooEnv(common.SingleEnvWrapper, ParallelEnv):
     """A single-env :class:`Environment` (``num_envs=1``) behind PettingZoo's parallel API.
 
     Args:
@@ -52,14 +52,8 @@ class PettingZooEnv(ParallelEnv):
         self, seed: Optional[int] = None, options: Optional[dict] = None
     ) -> Tuple[Dict[str, Any], Dict[str, Any]]:
         """Start a new episode with every agent; ``seed`` re-seeds the Environment's streams."""
-        if seed is not None:
-            self.env.seed(seed)
-        obs, infos = self.env.reset(return_info=True)
         self.agents = list(self.possible_agents)
-        return (
-            common.to_numpy(common.by_agent(self.env, obs), index=0),
-            common.to_numpy(common.by_agent(self.env, infos), index=0),
-        )
+        return self._reset_env(seed)
 
     def step(self, actions: Dict[str, Any]) -> Tuple[Dict[str, Any], ...]:
         """Apply one action per live agent (a dict by name); all live agents must act."""
@@ -83,11 +77,3 @@ class PettingZooEnv(ParallelEnv):
             self.agents = []
         return result
 
-    def render(self) -> Optional[np.ndarray]:
-        """The frame as an HxWx3 uint8 array (None when made with ``render_mode=None``)."""
-        if self.render_mode is None:
-            return None
-        return self.env.render(mode="rgb_array", env_index=0)
-
-    def close(self) -> None:
-        self.env.close()

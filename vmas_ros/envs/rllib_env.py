@@ -27,7 +27,7 @@ __all__ = ["RLlibMultiAgentEnv", "env_creator", "register"]
 SEED_STRIDE = 1000
 
 
-class RLlibMultiAgentEnv(MultiAgentEnv):
+class RLlibMultiAgentEnv(common.SingleEnvWrapper, MultiAgentEnv):
     """A single-env :class:`Environment` (``num_envs=1``) behind RLlib's ``MultiAgentEnv``.
 
     All agents act every step and the episode ends for all of them together, so
@@ -57,14 +57,8 @@ class RLlibMultiAgentEnv(MultiAgentEnv):
         self, *, seed: Optional[int] = None, options: Optional[dict] = None
     ) -> Tuple[Dict[str, Any], Dict[str, Any]]:
         """Start a new episode; ``seed`` re-seeds the Environment's own streams."""
-        if seed is not None:
-            self.env.seed(seed)
-        obs, infos = self.env.reset(return_info=True)
         self.agents = list(self.possible_agents)
-        return (
-            common.to_numpy(common.by_agent(self.env, obs), index=0),
-            common.to_numpy(common.by_agent(self.env, infos), index=0),
-        )
+        return self._reset_env(seed)
 
     def step(self, action_dict: Mapping[str, Any]) -> Tuple[Dict[str, Any], ...]:
         """Apply one action per agent (a dict by name; every agent acts every step)."""
@@ -80,15 +74,6 @@ class RLlibMultiAgentEnv(MultiAgentEnv):
             self.agents = []
         info = common.to_numpy(common.by_agent(self.env, infos), index=0)
         return observations, rewards, terminateds, truncateds, info
-
-    def render(self) -> Optional[np.ndarray]:
-        """The frame as an HxWx3 uint8 array (None when made with ``render_mode=None``)."""
-        if self.render_mode is None:
-            return None
-        return self.env.render(mode="rgb_array", env_index=0)
-
-    def close(self) -> None:
-        self.env.close()
 
 
 def env_creator(config: Optional[Mapping[str, Any]] = None) -> RLlibMultiAgentEnv:

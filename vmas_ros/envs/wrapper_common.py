@@ -193,3 +193,30 @@ def merge_where(mask: Tensor, new: Any, old: Any) -> Any:
     if isinstance(new, (list, tuple)):
         return type(new)(merge_where(mask, n, o) for n, o in zip(new, old))
     return new
+
+
+class SingleEnvWrapper:
+    """``render``, ``close`` and the reset of the wrappers around one env (gymnasium, pettingzoo, rllib).
+
+    Listed first among a wrapper's bases, so these override the library's defaults.
+    Subclasses set ``self.env`` (an Environment with ``num_envs=1``) and ``self.render_mode``.
+    """
+
+    env: Any
+    render_mode: Optional[str]
+
+    def _reset_env(self, seed: Optional[int]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
+        """Re-seed (when ``seed`` is given) and reset; every agent's observation and info, by name, as numpy."""
+        if seed is not None:
+            self.env.seed(seed)
+        obs, infos = self.env.reset(return_info=True)
+        return to_numpy(by_agent(self.env, obs), index=0), to_numpy(by_agent(self.env, infos), index=0)
+
+    def render(self) -> Optional[np.ndarray]:
+        """The frame as an HxWx3 uint8 array (None when made with ``render_mode=None``)."""
+        if self.render_mode is None:
+            return None
+        return self.env.render(mode="rgb_array", env_index=0)
+
+    def close(self) -> None:
+        self.env.close()

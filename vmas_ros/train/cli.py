@@ -12,7 +12,7 @@ import json
 import sys
 from dataclasses import MISSING, fields
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, Dict, Mapping, Optional, Sequence
 
 from vmas_ros.train.config import ALGORITHM_NAMES, TrainConfig, load_config_file
 
@@ -41,11 +41,23 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
                         help="continue the run in DIR (its checkpoint.pt) up to --iterations; "
                              "output goes to DIR unless --out is given")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_config_flags(parser)
+
+
+def add_config_flags(parser: argparse.ArgumentParser, skip: Sequence[str] = (),
+                     defaults: Optional[Mapping[str, Any]] = None) -> None:
+    """One flag per TrainConfig field not in ``skip`` (argparse default None = "not given").
+
+    ``defaults`` overrides the default shown in the help (what the caller fills in
+    for flags that were not given), e.g. the suite's.
+    """
     for f in fields(TrainConfig):
+        if f.name in skip:
+            continue
         default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
-        text = f.metadata.get("help", "")
-        help_text = f"{text} (default {json.dumps(default)})"
-        kwargs: Dict[str, Any] = {"dest": f.name, "default": None, "help": help_text}
+        default = (defaults or {}).get(f.name, default)
+        kwargs: Dict[str, Any] = {"dest": f.name, "default": None,
+                                  "help": f"{f.metadata.get('help', '')} (default {json.dumps(default)})"}
         if isinstance(default, bool):
             kwargs["action"] = argparse.BooleanOptionalAction
         elif isinstance(default, dict):

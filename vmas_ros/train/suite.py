@@ -19,11 +19,11 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
-from vmas_ros.train.cli import _flag, _json_object
+from vmas_ros.train.cli import add_config_flags
 from vmas_ros.train.config import ALGORITHM_NAMES, TrainConfig, load_config_file
 
 __all__ = ["add_train_suite_arguments", "run_train_suite_command", "SuiteRun", "plan_runs", "train_one",
@@ -83,19 +83,7 @@ def add_train_suite_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, default=None,
                         help="torch CPU threads (default: torch's own choice)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-    for f in fields(TrainConfig):
-        if f.name in _PER_RUN:
-            continue
-        default = _SUITE_DEFAULTS.get(f.name, f.default if f.default is not MISSING else f.default_factory())  # type: ignore[misc]
-        kwargs: Dict[str, Any] = {"dest": f.name, "default": None,
-                                  "help": f"{f.metadata.get('help', '')} (default {json.dumps(default)})"}
-        if isinstance(default, bool):
-            kwargs["action"] = argparse.BooleanOptionalAction
-        elif isinstance(default, dict):
-            kwargs.update(type=_json_object, metavar="JSON")
-        else:
-            kwargs["type"] = type(default)
-        parser.add_argument(_flag(f.name), **kwargs)
+    add_config_flags(parser, skip=_PER_RUN, defaults=_SUITE_DEFAULTS)
 
 
 def _base_values(args: argparse.Namespace) -> Dict[str, Any]:
