@@ -24,6 +24,7 @@ namespace (``--ros-args -r __ns:=/robot1``).
 """
 from __future__ import annotations
 
+import abc
 import importlib
 import math
 from typing import Any, Dict, Mapping, Sequence
@@ -31,7 +32,7 @@ from typing import Any, Dict, Mapping, Sequence
 import numpy as np
 
 
-class ObservationAdapter:
+class ObservationAdapter(abc.ABC):
     """Base of observation adapters: the agents' names and the policy's observation size."""
 
     def __init__(self, agents: Sequence[str], observation_size: int, **kwargs: Any) -> None:
@@ -40,13 +41,13 @@ class ObservationAdapter:
         self.agents = list(agents)
         self.observation_size = int(observation_size)
 
+    @abc.abstractmethod
     def topics(self) -> Dict[str, type]:
         """Topic name -> message class of every topic ``build`` reads."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def build(self, latest: Mapping[str, Any]) -> np.ndarray:
         """The observations [n_agents, observation_size]; NaN rows where inputs are missing."""
-        raise NotImplementedError
 
     def empty(self) -> np.ndarray:
         return np.full((len(self.agents), self.observation_size), np.nan, dtype=np.float32)
