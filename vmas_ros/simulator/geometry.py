@@ -240,25 +240,60 @@ def closest_point_on_box_boundary_xy(
 ) -> Tuple[Tensor, Tensor]:
     """:func:`closest_point_on_box_boundary` on separate x/y components.
 
-    The four sides are tried in :func:`box_edges` order with a running minimum:
-    stacking them into ``[..., 4, 2]`` candidates made every op stride over pairs
-    of floats, and this kernel is the box-sphere contact of every substep. Each
-    side's candidate is the same float arithmetic as :func:`closest_point_on_segment`
-    on that side, and the first side wins ties, as ``argmin`` would.
+    Each side's candidate is the same float arithmetic as
+    :func:`closest_point_on_segment` on that side, and the first side in
+    :func:`box_edges` order wins ties. Two bit-identical layouts, chosen by size
+    (this kernel is the box-sphere contact of every substep): small batches stack
+    the four sides on a leading dim and pick with one ``argmin`` (fewer ops:
+    about 4x faster at one env); large ones keep a running minimum over the sides
+    on separate x/y tensors (there ``argmin`` and ``gather`` over big stacks cost
+    more than the extra ops: about 2.5x faster at 10,000 envs).
     """
+    n = max(t.numel() for t in (cx, cy, px, py, torch.as_tensor(rot)))
+    if n <= _STACKED_SIDES_MAX_ELEMENTS:
+        return _box_boundary_stacked(cx, cy, rot, length, width, px, py)
+    return _box_boundary_running(cx, cy, rot, length, width, px, py)
+
+
+#: up to this many points closest_point_on_box_boundary_xy stacks the four sides (measured crossover)
+_STACKED_SIDES_MAX_ELEMENTS = 256
+
+
+def _box_sides(cx: Tensor, cy: Tensor, rot: Tensor, length: Scalar, width: Scalar) -> tuple:
+    """Per side, in box_edges order: (centre x, centre y, direction x, direction y, half length)."""
     across = rot + math.pi / 2
     cos_d, sin_d, cos_n, sin_n = torch.cos(rot), torch.sin(rot), torch.cos(across), torch.sin(across)
     half_l, half_w = length / 2, width / 2
     dx, dy, nx, ny = cos_d * half_l, sin_d * half_l, cos_n * half_w, sin_n * half_w
-    # (edge centre x, y, edge direction x, y, half edge length), box_edges order
-    sides = (
+    return (
         (cx + dx, cy + dy, cos_n, sin_n, half_w),
         (cx - dx, cy - dy, cos_n, sin_n, half_w),
         (cx + nx, cy + ny, cos_d, sin_d, half_l),
         (cx - nx, cy - ny, cos_d, sin_d, half_l),
     )
+
+
+def _box_boundary_stacked(cx, cy, rot, length, width, px, py) -> Tuple[Tensor, Tensor]:
+    (ex0, ey0, ux0, uy0, hw), (ex1, ey1, _, _, _), (ex2, ey2, ux2, uy2, hl), (ex3, ey3, _, _, _) = _box_sides(
+        cx, cy, rot, length, width)
+    hw, hl = _as_tensor(hw, px), _as_tensor(hl, px)
+    # the four sides on a leading dim; everything else broadcasts as it comes
+    ex, ey = torch.stack([ex0, ex1, ex2, ex3]), torch.stack([ey0, ey1, ey2, ey3])
+    ux, uy = torch.stack([ux0, ux0, ux2, ux2]), torch.stack([uy0, uy0, uy2, uy2])
+    half = torch.stack(torch.broadcast_tensors(hw, hw, hl, hl))
+    along = (px - ex) * ux + (py - ey) * uy
+    along = torch.maximum(torch.minimum(along, half), -half)
+    qx, qy = ex + along * ux, ey + along * uy
+    # vector_norm over a contiguous [..., 2] rounds the distance (and so breaks near-ties) as VMAS does
+    dist = torch.linalg.vector_norm(torch.stack(torch.broadcast_tensors(px - qx, py - qy), dim=-1), dim=-1)
+    pick = dist.argmin(dim=0, keepdim=True)  # the first side wins ties
+    qx, qy = torch.broadcast_tensors(qx, qy, dist)[:2]
+    return qx.gather(0, pick).squeeze(0), qy.gather(0, pick).squeeze(0)
+
+
+def _box_boundary_running(cx, cy, rot, length, width, px, py) -> Tuple[Tensor, Tensor]:
     best_x = best_y = best_dist = None
-    for ex, ey, ux, uy, half in sides:
+    for ex, ey, ux, uy, half in _box_sides(cx, cy, rot, length, width):
         along = (px - ex) * ux + (py - ey) * uy
         along = torch.maximum(torch.minimum(along, half), -half)
         qx, qy = ex + along * ux, ey + along * uy
