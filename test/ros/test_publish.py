@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 import vmas_ros
 from vmas_ros.ros import convert
-from vmas_ros.ros.lidar_batch import BatchedLidars, cast_together
+from vmas_ros.simulator.lidar_batch import BatchedLidars, cast_together
 from vmas_ros.ros.publish import LidarReadings, StateMessages
 from vmas_ros.simulator.sensors import Lidar
 

@@ -300,7 +300,7 @@ class LidarReadings:
     """
 
     def __init__(self, lidars: Dict[int, list]) -> None:
-        from vmas_ros.ros.lidar_batch import BatchedLidars
+        from vmas_ros.simulator.lidar_batch import BatchedLidars
 
         self.lidars = lidars
         self._marks: Optional[Dict[int, list]] = None

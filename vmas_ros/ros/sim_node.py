@@ -14,7 +14,7 @@ services   ~/reset (Trigger), ~/pause (SetBool), ~/step (Trigger).
 All stamps are simulation time, which advances by the world's dt per step.
 No physics lives here: this file converts tensors to messages and back. The
 per-step state topics are filled in bulk as pre-serialised bytes (publish.py),
-every lidar is cast once per step in one batch (lidar_batch.py), and unpaced
+every lidar is cast once per step in one batch (simulator/lidar_batch.py), and unpaced
 (real_time_factor 0) the node runs several steps per timer callback.
 """
 from __future__ import annotations

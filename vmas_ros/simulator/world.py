@@ -420,12 +420,17 @@ class World:
         """Distance [B] along one ray per env from ``entity`` to the nearest filtered entity."""
         return self.cast_rays(entity, angles.unsqueeze(-1), max_range, entity_filter).squeeze(-1)
 
-    def cast_rays(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
-        """Distances [B, R] along rays at world ``angles`` [B, R]; ``max_range`` where nothing is hit."""
+    def ray_targets(self, entity: Entity, entity_filter: Callable[[Entity], bool]) -> List[Entity]:
+        """The entities rays from ``entity`` can hit (``entity_filter`` true, not itself); all must collide with it."""
         targets = [e for e in self.entities if e is not entity and entity_filter(e)]
         for e in targets:
             if not (e.collides(entity) and entity.collides(e)):
                 raise ValueError(f"rays are cast only among collidable entities: {entity.name!r} and {e.name!r} do not collide")
+        return targets
+
+    def cast_rays(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
+        """Distances [B, R] along rays at world ``angles`` [B, R]; ``max_range`` where nothing is hit."""
+        targets = self.ray_targets(entity, entity_filter)
         # rays [1, B, R] against targets [E, B, 1]: every op runs over contiguous [B, R] blocks
         # and the nearest hit is a reduction over the leading dim
         origin = entity.state.pos

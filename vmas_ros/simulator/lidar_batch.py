@@ -2,8 +2,8 @@
 
 ``Lidar.measure`` casts one agent's rays against its targets: with four agents
 that is four rounds of the same dozen small tensor ops, and at one env each op
-is pure overhead (~40-90 us a round here). sim_node needs every lidar every
-step, so it casts them together: rays ``[L, B, R]`` of all L lidars against the
+is pure overhead (~40-90 us a round here). Callers that need every lidar every
+step (sim_node) cast them together: rays ``[L, B, R]`` of all L lidars against the
 union of their targets ``[E, ...]``, each lidar's non-targets masked out before
 the nearest hit is taken. The intersection functions are the engine's own
 (``vmas_ros.simulator.raycast``), elementwise, so every (lidar, target, ray)
@@ -27,12 +27,6 @@ import torch
 from vmas_ros.simulator import raycast
 
 
-def _targets(world, sensor) -> list:
-    """The entities ``sensor``'s rays can hit, as ``World.cast_rays`` selects them."""
-    owner = sensor.agent
-    return [e for e in world.entities if e is not owner and sensor.entity_filter(e)]
-
-
 @dataclass
 class _Group:
     """One shape kind of a batched cast: the union of the lidars' targets and their constants."""
@@ -54,12 +48,6 @@ class BatchedLidars:
         self._plans: Dict[tuple, Optional[List[_Group]]] = {}
 
     def _plan(self, world, sensors, targets) -> Optional[List[_Group]]:
-        for sensor, found in zip(sensors, targets):
-            owner = sensor.agent
-            for e in found:
-                if not (e.collides(owner) and owner.collides(e)):
-                    raise ValueError(f"rays are cast only among collidable entities: {owner.name!r} and "
-                                     f"{e.name!r} do not collide")
         device = sensors[0].agent.state.pos.device
         groups = []
         for kind in ("box", "sphere", "line"):
@@ -89,7 +77,7 @@ class BatchedLidars:
         n_rays, max_range = sensors[0].n_rays, float(sensors[0].max_range)
         if any(s.n_rays != n_rays or float(s.max_range) != max_range for s in sensors):
             return None
-        targets = [_targets(world, s) for s in sensors]
+        targets = [world.ray_targets(s.agent, s.entity_filter) for s in sensors]
         key = (tuple(id(s) for s in sensors), tuple(tuple(id(e) for e in t) for t in targets))
         if key not in self._plans:
             self._plans[key] = self._plan(world, sensors, targets)
