@@ -52,7 +52,7 @@ def test_compile_physics_can_be_turned_off(device):
     env.world.compile_physics()
     assert env.world.physics_compiled
     env.world.compile_physics(enabled=False)
-    assert env.world._physics_step is physics.step
+    assert env.world._physics_step is physics.step_planar
 
 
 @pytest.mark.slow

@@ -31,9 +31,14 @@ def _randomize(up, ours, seed: int, spread: float = 0.35) -> None:
     parity.copy_random_state(up, ours, seed, spread)
 
 
-def _run(up, ours, seed: int, steps: int = STEPS) -> float:
-    """Step both with identical random actions; return the largest speed seen (to prove motion)."""
-    return parity.run_lockstep(up, ours, seed + 1, steps=steps).fastest
+def _run(up, ours, seed: int, steps: int = STEPS, resync: bool = False) -> float:
+    """Step both with identical random actions; return the largest speed seen (to prove motion).
+
+    ``resync``: compare one step at a time from upstream's state, for chaotic
+    cases (see ``parity.run_lockstep``).
+    """
+    return parity.run_lockstep(up, ours, seed + 1, steps=steps, resync=resync).fastest
+
 
 
 KINDS = ["sphere", "box", "line"]
@@ -80,7 +85,10 @@ def test_world_forces_match_upstream(world_kwargs):
         "ShapesScenario", agent_shapes=["sphere", "box", "line"], landmark_shapes=["sphere", "box"], **world_kwargs
     )
     _randomize(up, ours, seed=11)
-    _run(up, ours, seed=12)
+    # friction (stick-slip) and a 4x stiffer contact amplify the last bit of a sphere-sphere length
+    # (see parity.run_lockstep): compared step by step
+    chaotic = "linear_friction" in world_kwargs or world_kwargs.get("collision_force", 0) > 100
+    _run(up, ours, seed=12, resync=chaotic)
 
 
 def test_lidar_matches_upstream():

@@ -54,6 +54,16 @@ def mask_le(a: Tensor, b) -> Tensor:
     return torch.le(a, b, out=a.new_empty(_broadcast_shape(a, b)))
 
 
+def mask_gt(a: Tensor, b) -> Tensor:
+    """``a > b`` as float 0/1 (broadcast), without a bool intermediate."""
+    return torch.gt(a, b, out=a.new_empty(_broadcast_shape(a, b)))
+
+
+def mask_ne(a: Tensor, b) -> Tensor:
+    """``a != b`` as float 0/1 (broadcast), without a bool intermediate."""
+    return torch.ne(a, b, out=a.new_empty(_broadcast_shape(a, b)))
+
+
 def mask_eq(a: Tensor, b) -> Tensor:
     """``a == b`` as float 0/1 (broadcast), without a bool intermediate."""
     return torch.eq(a, b, out=a.new_empty(_broadcast_shape(a, b)))
@@ -112,6 +122,39 @@ def _gate(gap: Tensor, reach: Tensor, broad_phase: str) -> Tensor:
 
 def _vectors(x: Tensor, y: Tensor) -> Tensor:
     return torch.stack([x, y], dim=-1)
+
+
+def sphere_pair_forces(pair: PairTable, xy: Tensor, params, exact: bool = False) -> Tensor:
+    """Force ``[2, P, B]`` on the first sphere of each pair (the second gets the opposite), from positions ``[2, N, B]``.
+
+    The common kernel in few calls: both components gathered, differenced and
+    scaled at once, with :func:`soft_contact`'s float arithmetic in the same
+    order. Lengths are ``sqrt(x * x + y * y)`` unless ``exact``: :func:`norm`
+    rounds like VMAS but needs an interleaving copy that costs more than the
+    rest of the kernel, and only stiff worlds (joints) amplify that last bit.
+    No broad-phase gate: for two spheres the broad phase's reach is the sum of
+    the radii, the contact distance itself, so every active contact passes it.
+    """
+    d = xy[:, pair.index_a] - xy[:, pair.index_b]
+    dist = norm(d[0], d[1]) if exact else (d * d).sum(0).sqrt()
+    p = pair.params
+    dist_min = p["a_radius"] + p["b_radius"]
+    margin = params.contact_margin
+    penetration = torch.logaddexp(_zero(dist), (dist_min - dist) * 1.0 / margin) * margin
+    scale = penetration * (mask_ge(dist, MIN_CONTACT_DIST) * mask_le(dist, dist_min))
+    return d * params.collision_force / dist.clamp_min(1e-8) * scale
+
+
+def _zero(like: Tensor) -> Tensor:
+    """A cached 0-dim zero on ``like``'s device and dtype (saves a call per contact kernel)."""
+    key = (like.device, like.dtype)
+    zero = _ZEROS.get(key)
+    if zero is None:
+        zero = _ZEROS[key] = torch.zeros((), device=like.device, dtype=like.dtype)
+    return zero
+
+
+_ZEROS: dict = {}
 
 
 def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params) -> PairForces:

@@ -35,11 +35,17 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator import contacts
+from vmas_ros.simulator.layout import join_xy, split_xy_stacked
 from vmas_ros.simulator.tables import PairTable, WorldTables
 from vmas_ros.simulator.utils import TorchUtils
 
 #: r x f with a trailing size-1 dim, the torque of force f applied at lever arm r
 cross = TorchUtils.cross
+
+
+#: up to this many entity-env rows the step selects with ``torch.where`` (one call, per-call cost
+#: dominates); above, with float 0/1 masks (three calls, but ~25x cheaper per element on the CPU)
+SMALL_BATCH_ELEMENTS = 8192
 
 
 @dataclass
@@ -69,6 +75,34 @@ class BodyState:
     ang_vel: Tensor
 
 
+@dataclass
+class PlanarState:
+    """State of all entities as stacked planar components.
+
+    ``q`` is ``[3, N, B]``: x, y and angle; ``v`` is ``[3, N, B]``: vx, vy and
+    angular velocity. One elementwise op then integrates all three
+    coordinates, with per-coordinate constants as ``[3, N, 1]`` columns.
+    """
+
+    q: Tensor
+    v: Tensor
+
+    @classmethod
+    def from_vectors(cls, state: BodyState) -> "PlanarState":
+        q = torch.cat([split_xy_stacked(state.pos.contiguous()), state.rot[..., 0].unsqueeze(0)])
+        v = torch.cat([split_xy_stacked(state.vel.contiguous()), state.ang_vel[..., 0].unsqueeze(0)])
+        return cls(q, v)
+
+    def to_vectors(self) -> BodyState:
+        q, v = self.q, self.v
+        return BodyState(join_xy(q[0], q[1]), join_xy(v[0], v[1]), q[2].unsqueeze(-1), v[2].unsqueeze(-1))
+
+
+def stack_actions(force: Tensor, torque: Tensor) -> Tensor:
+    """Per-entity force ``[N, B, 2]`` and torque ``[N, B, 1]`` as one ``[3, N, B]`` (fx, fy, torque)."""
+    return torch.cat([split_xy_stacked(force.contiguous()), torque[..., 0].unsqueeze(0)])
+
+
 def pair_forces(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
     """Contact forces [P, B, 2] and torques [P, B, 1] on both members of each pair of one kernel.
 
@@ -80,16 +114,6 @@ def pair_forces(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[
     zero = torch.zeros_like(fax)
     t_a, t_b = (zero if t is None else t for t in (t_a, t_b))
     return (torch.stack([fax, fay], dim=-1), torch.stack([fbx, fby], dim=-1), t_a.unsqueeze(-1), t_b.unsqueeze(-1))
-
-
-def scatter_pairs(total: Tensor, index_ab: Tensor, on_a: Tensor, on_b: Tensor) -> Tensor:
-    """Add per-pair values [P, B, D] onto per-entity totals [N, B, D] in pair order (a0, b0, a1, b1, ...).
-
-    Summing in the same order as VMAS keeps results bit-identical, which matters
-    because stiff joints amplify a one-ulp difference within a few steps.
-    """
-    values = torch.stack([on_a, on_b], dim=1).flatten(0, 1)
-    return total.index_add(0, index_ab, values)
 
 
 def clamp_norm(vec: Tensor, max_norm) -> Tensor:
@@ -106,12 +130,31 @@ def clamp_norm(vec: Tensor, max_norm) -> Tensor:
 
 
 def friction(vel: Tensor, coeff: Tensor, mass: Tensor, sub_dt: float) -> Tensor:
-    """Coulomb-like friction opposing ``vel``, never strong enough to reverse it in one substep."""
+    """Coulomb-like friction opposing ``vel`` ([.., D] vectors), never strong enough to reverse it in one substep."""
     speed = torch.linalg.vector_norm(vel, dim=-1, keepdim=True)
     moving = speed != 0
     limit = torch.minimum(coeff * mass, vel.abs() / sub_dt * mass)
     force = -(vel / torch.where(moving, speed, 1e-8)) * limit
     return torch.where(moving, force, 0.0)
+
+
+def _friction_xy(vx: Tensor, vy: Tensor, coeff: Tensor, mass: Tensor, sub_dt: float) -> Tuple[Tensor, Tensor]:
+    """:func:`friction` on planar components ``[N, B]`` (``coeff``, ``mass``: ``[N, 1]``)."""
+    speed = contacts.norm(vx, vy)
+    moving = contacts.mask_ne(speed, 0.0)
+    inv = moving / (speed + (1 - moving))  # 1/speed where moving, 0 elsewhere (exact)
+    cap = coeff * mass
+    fx = -(vx * inv) * torch.minimum(cap, vx.abs() / sub_dt * mass)
+    fy = -(vy * inv) * torch.minimum(cap, vy.abs() / sub_dt * mass)
+    return fx, fy
+
+
+def _friction_1d(w: Tensor, coeff: Tensor, inertia: Tensor, sub_dt: float) -> Tensor:
+    """Friction torque opposing the angular velocity ``w`` ``[N, B]``."""
+    speed = w.abs()
+    moving = contacts.mask_ne(speed, 0.0)
+    inv = moving / (speed + (1 - moving))
+    return -(w * inv) * torch.minimum(coeff * inertia, speed / sub_dt * inertia)
 
 
 def step(
@@ -122,67 +165,134 @@ def step(
     action_torque: Tensor,
     fixed_rotation: Optional[Tensor],
 ) -> BodyState:
-    """Advance all envs by one ``dt``. ``action_*`` are per entity ([N, B, 2] / [N, B, 1])."""
-    sub_dt = params.dt / params.substeps
-    pos, vel, rot, ang_vel = state.pos, state.vel, state.rot, state.ang_vel
+    """Advance all envs by one ``dt``. ``action_*`` are per entity ([N, B, 2] / [N, B, 1]).
+
+    The vector-layout face of :func:`step_planar` (tools and tests);
+    ``World.step`` calls :func:`step_planar` directly and keeps the planar state between steps.
+    """
+    actions = stack_actions(action_force, action_torque)
+    return step_planar(PlanarState.from_vectors(state), tables, params, actions, fixed_rotation).to_vectors()
+
+
+def step_planar(
+    state: PlanarState, tables: WorldTables, params: StepParams, actions: Tensor, fixed_rotation: Optional[Tensor],
+) -> PlanarState:
+    """Advance all envs by one ``dt``; ``actions`` is ``[3, N, B]`` (fx, fy, torque, see :func:`stack_actions`).
+
+    Pair and joint forces are added with ``index_add`` straight into the
+    ``[3, N, B]`` force, so no per-pair ``[P, B, 2]`` vector is ever
+    assembled. ``fixed_rotation`` is the joints' ``[J, B, 1]`` target angles.
+    """
+    c = step_constants(tables, params)
+    q, v = state.q, state.v
+    v0 = v
     fixed = None if fixed_rotation is None else fixed_rotation[..., 0]
     for substep in range(params.substeps):
-        force = action_force
-        torque = action_torque
+        force = actions
         if tables.has_friction:
-            force = force + friction(vel, tables.linear_friction, tables.mass, sub_dt)
-            torque = torque + friction(ang_vel, tables.angular_friction, tables.inertia, sub_dt)
+            force = force + _friction(v, c, c["sub_dt"])
         if tables.has_gravity:
-            force = force + tables.gravity_force
+            force = force + c["gravity"]
         if tables.joints is not None or tables.pairs:
-            # contact and joint kernels run on planar components (see contacts.py)
-            x, y, angle = pos[..., 0], pos[..., 1], rot[..., 0]
+            force = force.clone() if force is actions else force  # written in place below
+            x, y, rot = q[0], q[1], q[2]
         if tables.joints is not None:
             jt = tables.joints
-            fx, fy, t_a, t_b = contacts.joint_forces(jt, x, y, angle, fixed, params)
-            f_a = torch.stack([fx, fy], dim=-1)
-            force = scatter_pairs(force, jt.index_ab, f_a, -f_a)
-            torque = scatter_pairs(torque, jt.index_ab, t_a.unsqueeze(-1), t_b.unsqueeze(-1))
+            jfx, jfy, t_a, t_b = contacts.joint_forces(jt, x, y, rot, fixed, params)
+            _add_pairs(force, jt.index_ab, torch.stack([jfx, jfy, t_a]), torch.stack([-jfx, -jfy, t_b]))
         for pair in tables.pairs:
-            fax, fay, fbx, fby, t_a, t_b = contacts.pair_contact(pair, x, y, angle, params)
-            force = scatter_pairs(force, pair.index_ab, torch.stack([fax, fay], dim=-1), torch.stack([fbx, fby], dim=-1))
-            if t_a is not None or t_b is not None:  # both None: zero by construction (two spheres)
+            if pair.kind == ("sphere", "sphere"):
+                on_a = contacts.sphere_pair_forces(pair, q[:2], params, exact=tables.joints is not None)
+                _add_pairs(force[:2], pair.index_ab, on_a, -on_a)
+                continue
+            fax, fay, fbx, fby, t_a, t_b = contacts.pair_contact(pair, x, y, rot, params)
+            if t_a is None and t_b is None:
+                _add_pairs(force[:2], pair.index_ab, torch.stack([fax, fay]), torch.stack([fbx, fby]))
+            else:
                 zero = torch.zeros_like(fax)
-                torque = scatter_pairs(torque, pair.index_ab, (zero if t_a is None else t_a).unsqueeze(-1),
-                                       (zero if t_b is None else t_b).unsqueeze(-1))
+                t_a, t_b = (zero if t is None else t for t in (t_a, t_b))
+                _add_pairs(force, pair.index_ab, torch.stack([fax, fay, t_a]), torch.stack([fbx, fby, t_b]))
 
         if substep == 0:
-            keep = _keep_fraction(tables)
-            vel = vel * keep
-            ang_vel = ang_vel * keep
-        new_vel = vel + force / tables.mass * sub_dt
+            v = v * c["keep"]
+        new_v = v + force / c["mass"] * c["sub_dt"]  # VMAS's rounding
         if tables.limits_speed:
-            new_vel = clamp_norm(new_vel, tables.max_speed)
+            speed = contacts.norm(new_v[0], new_v[1])
+            over = contacts.mask_gt(speed, c["max_speed"])
+            # VMAS's rounding: v / |v| * max where over the limit
+            limited = new_v[:2] / (speed + (1 - over)) * c["finite_max_speed"]
+            new_v = torch.cat([contacts.select(over, limited, new_v[:2]), new_v[2:]])
         if tables.limits_velocity:
-            new_vel = torch.maximum(torch.minimum(new_vel, tables.v_range), -tables.v_range)
-        new_pos = pos + new_vel * sub_dt
+            new_v = torch.clamp(new_v, -c["v_range"], c["v_range"])
+        new_q = q + new_v * c["sub_dt"]
         if params.x_semidim is not None or params.y_semidim is not None:
-            new_pos = _clamp_to_bounds(new_pos, params.x_semidim, params.y_semidim)
-        pos = torch.where(tables.movable, new_pos, pos)
-        vel = torch.where(tables.movable, new_vel, state.vel if substep == 0 else vel)
-        new_ang_vel = ang_vel + torque / tables.inertia * sub_dt
-        rot = torch.where(tables.rotatable, rot + new_ang_vel * sub_dt, rot)
-        ang_vel = torch.where(tables.rotatable, new_ang_vel, state.ang_vel if substep == 0 else ang_vel)
-    return BodyState(pos, vel, rot, ang_vel)
+            new_q = torch.clamp(new_q, -c["semidims"], c["semidims"])
+        if c["all_free"]:
+            q, v = new_q, new_v
+        elif new_q.numel() <= SMALL_BATCH_ELEMENTS:
+            free = c["free_bool"]
+            q, v = torch.where(free, new_q, q), torch.where(free, new_v, v0)
+        else:
+            free, held = c["free"], c["held"]
+            q, v = new_q * free + q * held, new_v * free + v0 * held
+    return PlanarState(q, v)
 
 
-def _keep_fraction(tables: WorldTables) -> Tensor:
-    """``1 - drag`` per entity [N, 1, 1], computed once per tables (the same float as computing it each step)."""
-    keep = getattr(tables, "_keep_cache", None)
-    if keep is None:
-        keep = tables._keep_cache = 1 - tables.drag
-    return keep
+def _add_pairs(force: Tensor, index_ab: Tensor, on_a: Tensor, on_b: Tensor) -> None:
+    """Add per-pair values ``[C, P, B]`` onto ``force`` ``[C, N, B]`` in place, in pair order (a0, b0, a1, b1, ...).
+
+    The same summation order as VMAS, so kernels that compute their forces as
+    VMAS does (joints, boxes, lines) stay bit-identical to it: stiff joints
+    amplify a one-ulp difference within a few steps.
+    """
+    force.index_add_(1, index_ab, torch.stack([on_a, on_b], dim=2).flatten(1, 2))
 
 
-def _clamp_to_bounds(pos: Tensor, x_semidim: Optional[float], y_semidim: Optional[float]) -> Tensor:
-    x, y = pos[..., 0], pos[..., 1]
-    if x_semidim is not None:
-        x = x.clamp(-x_semidim, x_semidim)
-    if y_semidim is not None:
-        y = y.clamp(-y_semidim, y_semidim)
-    return torch.stack([x, y], dim=-1)
+def _friction(v: Tensor, c: dict, sub_dt: float) -> Tensor:
+    """Coulomb-like friction ``[3, N, B]`` opposing the velocity, never reversing it within one substep."""
+    speed = contacts.norm(v[0], v[1])
+    speed = torch.stack([speed, speed, v[2].abs()])
+    moving = contacts.mask_ne(speed, 0.0)
+    inv = moving / (speed + (1 - moving))  # 1 / speed where moving, 0 elsewhere (exact)
+    return -(v * inv) * torch.minimum(c["friction_cap"], v.abs() * c["mass_over_dt"])
+
+
+def step_constants(tables: WorldTables, params: StepParams) -> dict:
+    """Per-coordinate constants of :func:`step_planar` as ``[3, N, 1]`` columns, computed once per tables.
+
+    Rows are (x, y, angle): mass for the first two, moment of inertia for the
+    angle. Masks are float 0/1 for large batches (``a * 1 + b * 0`` is exactly
+    ``a`` for finite values, and multiplying is much cheaper than
+    ``torch.where`` on the CPU) and bool for small ones (one call instead of three).
+    """
+    sub_dt = params.dt / params.substeps
+    key = (sub_dt, params.x_semidim, params.y_semidim)
+    cached = getattr(tables, "_planar_cache", None)
+    if cached is not None and cached["key"] == key:
+        return cached
+    col = lambda t: t[..., 0]  # noqa: E731  [N, 1, 1] -> [N, 1]
+    per_coord = lambda lin, ang: torch.stack([lin, lin, ang])  # noqa: E731
+    mass, inertia = col(tables.mass), col(tables.inertia)
+    movable, rotatable = col(tables.movable), col(tables.rotatable)
+    free_bool = per_coord(movable, rotatable)
+    free = free_bool.to(mass.dtype)
+    max_speed = col(tables.max_speed)
+    v_range = col(tables.v_range)
+    inf = float("inf")
+    no_limit = torch.full_like(v_range, inf)
+    bounds = [inf if b is None else b for b in (params.x_semidim, params.y_semidim)] + [inf]
+    cached = {
+        "key": key, "sub_dt": sub_dt,
+        "keep": col(1 - tables.drag),
+        "mass": per_coord(mass, inertia),
+        "friction_cap": per_coord(col(tables.linear_friction) * mass, col(tables.angular_friction) * inertia),
+        "mass_over_dt": per_coord(mass, inertia) / sub_dt,
+        "gravity": torch.cat([split_xy_stacked(tables.gravity_force.contiguous()),
+                              torch.zeros_like(tables.gravity_force[..., 0]).unsqueeze(0)]),
+        "max_speed": max_speed, "finite_max_speed": torch.where(torch.isfinite(max_speed), max_speed, 0.0),
+        "v_range": torch.stack([v_range, v_range, no_limit]),
+        "free_bool": free_bool, "free": free, "held": 1 - free, "all_free": bool(free_bool.all()),
+        "semidims": torch.tensor(bounds, dtype=mass.dtype, device=mass.device).reshape(3, 1, 1),
+    }
+    tables._planar_cache = cached
+    return cached

@@ -10,6 +10,7 @@ when entities are added or a property changes, never inside the step.
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from dataclasses import dataclass, field
 from typing import Dict, List, Tuple
 
@@ -39,7 +40,7 @@ class PairTable:
     index_b: Tensor  # [P] long
     params: Dict[str, Tensor] = field(default_factory=dict)  # each [P, 1] (broadcasts over the batch)
 
-    @property
+    @cached_property
     def index_ab(self) -> Tensor:
         """[2P] indices a0, b0, a1, b1, ... for scattering both sides in pair order."""
         return torch.stack([self.index_a, self.index_b], dim=1).flatten()
@@ -67,7 +68,7 @@ class JointTable:
         self.anchor_bx, self.anchor_by = self.anchor_b[..., 0], self.anchor_b[..., 1]
         self.locked = (~self.rotate).to(self.dist.dtype).reshape(-1, 1)
 
-    @property
+    @cached_property
     def index_ab(self) -> Tensor:
         return torch.stack([self.index_a, self.index_b], dim=1).flatten()
 

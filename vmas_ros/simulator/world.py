@@ -17,6 +17,7 @@ from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
+from vmas_ros.simulator.layout import join_xy, split_xy_stacked
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.tables import WorldTables, build_tables
 from vmas_ros.simulator.utils import (
@@ -33,6 +34,11 @@ __all__ = ["World"]
 
 
 #: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
+def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) -> bool:
+    """Whether ``current`` are the very tensors ``parts``, none written in place since ``versions``."""
+    return len(parts) == len(current) and all(a is b and a._version == v for a, b, v in zip(parts, current, versions))
+
+
 _EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
 
 
@@ -87,10 +93,12 @@ class World:
         self._tables: Optional[WorldTables] = None
         #: field -> (the entity tensors it was stacked from, their versions, the stack)
         self._stacks: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
+        #: "q"/"v" -> (entity tensors, their versions, [3, N, B] planar state) of the last step's output
+        self._planar: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
         #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
-        self._physics_step = physics.step
+        self._physics_step = physics.step_planar
         #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
         self._ray_kernels = _EAGER_RAY_KERNELS
 
@@ -123,16 +131,16 @@ class World:
         bit-exact on the eager path.
         """
         if not enabled:
-            self._physics_step = physics.step
+            self._physics_step = physics.step_planar
             self._ray_kernels = _EAGER_RAY_KERNELS
             return
-        self._physics_step = torch.compile(physics.step, dynamic=False, mode=mode)
+        self._physics_step = torch.compile(physics.step_planar, dynamic=False, mode=mode)
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
         self._ray_kernels = {kind: torch.compile(fn, dynamic=False, mode=mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
-        return self._physics_step is not physics.step
+        return self._physics_step is not physics.step_planar
 
     # ------------------------------------------------------------------ registry
     def add_agent(self, agent: Agent) -> None:
@@ -243,28 +251,47 @@ class World:
         entities = self.entities
         if not entities:
             return
-        state = physics.BodyState(
-            pos=torch.stack([e.state._pos for e in entities]),
-            vel=torch.stack([e.state._vel for e in entities]),
-            rot=torch.stack([e.state._rot for e in entities]),
-            ang_vel=torch.stack([e.state._ang_vel for e in entities]),
-        )
-        force, torque = self._action_forces(tables, state)
+        state = self._planar_state(entities)
+        force, torque = self._action_forces(tables, state.q[0])
         fixed_rotation = None
         if tables.joints is not None:
             fixed_rotation = self._joint_fixed_rotations(tables)
-        new = self._physics_step(state, tables, self._step_params(), force, torque, fixed_rotation)
-        views = {name: getattr(new, name).unbind(0) for name in ("pos", "vel", "rot", "ang_vel")}
+        params = self._step_params()
+        physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
+        new = self._physics_step(state, tables, params, physics.stack_actions(force, torque), fixed_rotation)
+        q, v = new.q, new.v
+        stacks = {"pos": join_xy(q[0], q[1]), "vel": join_xy(v[0], v[1]), "rot": q[2].unsqueeze(-1),
+                  "ang_vel": v[2].unsqueeze(-1)}
+        views = {name: stack.unbind(0) for name, stack in stacks.items()}
         for e, pos, vel, rot, ang_vel in zip(entities, views["pos"], views["vel"], views["rot"], views["ang_vel"]):
             s = e.state
             s._pos, s._vel, s._rot, s._ang_vel = pos, vel, rot, ang_vel
-        # the stacks of the new state exist already: hand them to stacked_state for free
+        # the stacks of the new state exist already: hand them to stacked_state for free, and keep
+        # the planar state for the next step (both dropped once an entity's tensor changes)
         for name, parts in views.items():
-            self._stacks[name] = (list(parts), [t._version for t in parts], getattr(new, name))
+            self._stacks[name] = (list(parts), [t._version for t in parts], stacks[name])
+        self._planar = {
+            "q": ([*views["pos"], *views["rot"]], [t._version for t in views["pos"] + views["rot"]], q),
+            "v": ([*views["vel"], *views["ang_vel"]], [t._version for t in views["vel"] + views["ang_vel"]], v),
+        }
         if self._dim_c > 0:
             for agent in self._agents:
                 if not agent.silent and agent.action.c is not None:
                     agent.state._c = agent.action.c
+
+    def _planar_state(self, entities: List[Entity]) -> physics.PlanarState:
+        """The physics state, ``[3, N, B]`` each: last step's output unless some entity's state changed since."""
+        out = []
+        for key, (lin, ang) in (("q", ("pos", "rot")), ("v", ("vel", "ang_vel"))):
+            current = [getattr(e.state, lin) for e in entities] + [getattr(e.state, ang) for e in entities]
+            cached = self._planar.get(key)
+            if cached is not None and _unchanged(cached[0], cached[1], current):
+                out.append(cached[2])
+            else:
+                n = len(entities)
+                linear = split_xy_stacked(torch.stack(current[:n]))
+                out.append(torch.cat([linear, torch.stack(current[n:])[..., 0].unsqueeze(0)]))
+        return physics.PlanarState(*out)
 
     def stacked_state(self, field: str = "pos") -> Tensor:
         """``[n_entities, batch, D]``: a state field of every entity, in ``entities`` order.
@@ -281,26 +308,24 @@ class World:
         cached = self._stacks.get(field)
         if cached is not None:
             parts, versions, stack = cached
-            if len(parts) == len(current) and all(
-                a is b and a._version == v for a, b, v in zip(parts, current, versions)
-            ):
+            if _unchanged(parts, versions, current):
                 return stack
         stack = torch.stack(current)
         self._stacks[field] = (current, [t._version for t in current], stack)
         return stack
 
-    def _action_forces(self, tables: WorldTables, state: physics.BodyState) -> Tuple[Tensor, Tensor]:
-        """Agents' clamped action forces/torques scattered into per-entity tensors."""
+    def _action_forces(self, tables: WorldTables, like: Tensor) -> Tuple[Tensor, Tensor]:
+        """Agents' clamped action forces [N, B, 2] and torques [N, B, 1], zero for landmarks (``like``: [N, B])."""
         n_agents = tables.n_agents
         if n_agents == 0:
-            return torch.zeros_like(state.pos), torch.zeros_like(state.rot)
+            return like.new_zeros(*like.shape, 2), like.new_zeros(*like.shape, 1)
         n_landmarks = tables.n_entities - n_agents
         forces = [a.state._force for a in self._agents]
         torques = [a.state._torque for a in self._agents]
         fixed = self._fixed_agents(tables)
         if not (tables.limits_force or tables.limits_torque or fixed):
             # the common case: one stack per field, landmarks' rows from a cached zero block
-            zero_f, zero_t = self._zero_rows(state.pos)
+            zero_f, zero_t = self._zero_rows(like)
             return (torch.stack([zero_f] * n_landmarks + forces), torch.stack([zero_t] * n_landmarks + torques))
         agent_force, agent_torque = torch.stack(forces), torch.stack(torques)
         if tables.limits_force:
