@@ -86,22 +86,25 @@ def sample_clear_positions(
     """
     rows, device = occupied.shape[0], occupied.device
     row = torch.arange(rows, device=device)
-    taken = occupied
+    # planar x/y components: a broadcast over a trailing dim of 2 is a slow path on the CPU
+    taken_x, taken_y = occupied[..., 0], occupied[..., 1]
+    picked = []
     for _ in range(count):
-        drawn = torch.stack([
-            torch.empty(rows, candidates, device=device).uniform_(*x_bounds),
-            torch.empty(rows, candidates, device=device).uniform_(*y_bounds),
-        ], dim=-1)
-        if taken.shape[1]:
-            # squared distances, written out: a norm over a trailing dim of 2 is a slow reduction
-            gap = drawn.unsqueeze(2) - taken.unsqueeze(1)
-            clearance = (gap[..., 0] * gap[..., 0] + gap[..., 1] * gap[..., 1]).amin(dim=2)
+        draw_x = torch.empty(rows, candidates, device=device).uniform_(*x_bounds)
+        draw_y = torch.empty(rows, candidates, device=device).uniform_(*y_bounds)
+        if taken_x.shape[1]:
+            gap_x = draw_x.unsqueeze(2) - taken_x.unsqueeze(1)
+            gap_y = draw_y.unsqueeze(2) - taken_y.unsqueeze(1)
+            clearance = (gap_x * gap_x + gap_y * gap_y).amin(dim=2)  # squared distances
         else:
             clearance = torch.full((rows, candidates), math.inf, device=device)
         clear = clearance >= min_dist * min_dist
         pick = torch.where(clear.any(dim=1), clear.int().argmax(dim=1), clearance.argmax(dim=1))
-        taken = torch.cat([taken, drawn[row, pick].unsqueeze(1)], dim=1)
-    return taken[:, occupied.shape[1]:]
+        x, y = draw_x[row, pick], draw_y[row, pick]
+        picked.append(torch.stack([x, y], dim=-1))
+        taken_x = torch.cat([taken_x, x.unsqueeze(1)], dim=1)
+        taken_y = torch.cat([taken_y, y.unsqueeze(1)], dim=1)
+    return torch.stack(picked, dim=1) if picked else occupied.new_zeros(rows, 0, 2)
 
 
 def pairwise_distances(pos: Tensor) -> Tensor:
