@@ -9,7 +9,9 @@ The export contract (written by ``vmas_ros.train.export``):
   (dynamic batch); one output ``"action"``, float32 ``[batch, n_agents, action_size]``,
   the deterministic action already clipped to the action bounds;
 * ``<stem>.json``: the metadata checked by :func:`validate_metadata`; its
-  ``onnx_sha256`` ties it to exactly one ``.onnx`` file.
+  ``onnx_sha256`` ties it to exactly one ``.onnx`` file, which must keep all
+  its weights inside (no external data files, which no checksum covers) and
+  sit beside the JSON (``onnx_file`` is a bare file name).
 
 Every check raises ``ValueError`` naming the bad value and what was expected, so a
 mismatched or tampered pair of files fails at load time, not mid-mission.
@@ -22,11 +24,11 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 
-__all__ = ["OnnxPolicy", "validate_metadata", "POLICY_FORMAT", "POLICY_VERSION", "sha256_of_file"]
+__all__ = ["OnnxPolicy", "validate_metadata", "POLICY_FORMAT", "POLICY_VERSION", "sha256_of_file", "external_tensors"]
 
 #: value of the metadata's "format" key
 POLICY_FORMAT = "vmas_ros.policy"
@@ -34,6 +36,8 @@ POLICY_FORMAT = "vmas_ros.policy"
 POLICY_VERSION = 1
 INPUT_NAME = "observation"
 OUTPUT_NAME = "action"
+#: a policy's metadata is a few hundred bytes; a bigger file is not one (and is not read into memory)
+MAX_METADATA_BYTES = 1 << 20
 
 # key -> (expected python types, description used in error messages)
 _REQUIRED_KEYS: Dict[str, tuple] = {
@@ -115,6 +119,137 @@ def validate_metadata(meta: Any, source: str = "policy metadata") -> Dict[str, A
     return meta
 
 
+# ------------------------------------------------------------------ external data
+# A tensor may keep its data in another file (``data_location = EXTERNAL`` plus a
+# ``location`` path), which onnxruntime reads from the model's directory, or from
+# the working directory for a model loaded from bytes. No checksum covers those
+# bytes, and ``vmas-ros export`` never writes them, so such models are refused.
+# The protobuf wire format is walked here directly (field numbers of onnx.proto,
+# stable since IR version 3): this module must run without the onnx package and
+# be loadable on its own (no other vmas_ros import, which would pull in torch).
+
+# ModelProto
+_MODEL_GRAPH, _MODEL_FUNCTIONS = 7, 25
+# GraphProto
+_GRAPH_NODE, _GRAPH_INITIALIZER, _GRAPH_SPARSE_INITIALIZER = 1, 5, 15
+# NodeProto / FunctionProto
+_NODE_ATTRIBUTE, _FUNCTION_NODE = 5, 7
+# AttributeProto: t, g, tensors, graphs, sparse_tensor, sparse_tensors
+_ATTR_T, _ATTR_G, _ATTR_TENSORS, _ATTR_GRAPHS, _ATTR_SPARSE, _ATTR_SPARSES = 5, 6, 10, 11, 22, 23
+# SparseTensorProto: values, indices
+_SPARSE_VALUES, _SPARSE_INDICES = 1, 2
+# TensorProto
+_TENSOR_NAME, _TENSOR_EXTERNAL_DATA, _TENSOR_DATA_LOCATION = 8, 13, 14
+_EXTERNAL = 1
+_MAX_DEPTH = 64  # subgraphs nest (If/Loop bodies); deeper is malformed or hostile
+
+
+class OnnxFormatError(ValueError):
+    """The bytes are not a well-formed protobuf message."""
+
+
+def _varint(data: bytes, i: int) -> Tuple[int, int]:
+    value = shift = 0
+    while True:
+        if i >= len(data) or shift > 63:
+            raise OnnxFormatError("truncated or oversized varint")
+        byte = data[i]
+        i += 1
+        value |= (byte & 0x7F) << shift
+        if not byte & 0x80:
+            return value, i
+        shift += 7
+
+
+def _fields(data: bytes) -> Iterator[Tuple[int, int, object]]:
+    """(field number, wire type, value) of one message; length-delimited values as bytes."""
+    i = 0
+    while i < len(data):
+        key, i = _varint(data, i)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            value, i = _varint(data, i)
+        elif wire == 1:
+            value, i = data[i:i + 8], i + 8
+        elif wire == 2:
+            size, i = _varint(data, i)
+            if i + size > len(data):
+                raise OnnxFormatError("length-delimited field runs past the end")
+            value, i = data[i:i + size], i + size
+        elif wire == 5:
+            value, i = data[i:i + 4], i + 4
+        else:
+            raise OnnxFormatError(f"unsupported wire type {wire}")
+        yield number, wire, value
+
+
+def _tensor(data: bytes, found: List[str]) -> None:
+    name, external = "", False
+    for number, wire, value in _fields(data):
+        if number == _TENSOR_NAME and wire == 2:
+            name = bytes(value).decode("utf-8", "replace")
+        elif number == _TENSOR_DATA_LOCATION and wire == 0 and value == _EXTERNAL:
+            external = True
+        elif number == _TENSOR_EXTERNAL_DATA and wire == 2:
+            external = True
+    if external:
+        found.append(name or "<unnamed>")
+
+
+def _sparse(data: bytes, found: List[str]) -> None:
+    for number, wire, value in _fields(data):
+        if number in (_SPARSE_VALUES, _SPARSE_INDICES) and wire == 2:
+            _tensor(value, found)
+
+
+def _node(data: bytes, found: List[str], depth: int) -> None:
+    for number, wire, attribute in _fields(data):
+        if number != _NODE_ATTRIBUTE or wire != 2:
+            continue
+        for field, kind, value in _fields(attribute):
+            if kind != 2:
+                continue
+            if field in (_ATTR_T, _ATTR_TENSORS):
+                _tensor(value, found)
+            elif field in (_ATTR_G, _ATTR_GRAPHS):
+                _graph(value, found, depth + 1)
+            elif field in (_ATTR_SPARSE, _ATTR_SPARSES):
+                _sparse(value, found)
+
+
+def _graph(data: bytes, found: List[str], depth: int) -> None:
+    if depth > _MAX_DEPTH:
+        raise OnnxFormatError(f"subgraphs nested deeper than {_MAX_DEPTH}")
+    for number, wire, value in _fields(data):
+        if wire != 2:
+            continue
+        if number == _GRAPH_INITIALIZER:
+            _tensor(value, found)
+        elif number == _GRAPH_SPARSE_INITIALIZER:
+            _sparse(value, found)
+        elif number == _GRAPH_NODE:
+            _node(value, found, depth)
+
+
+def external_tensors(model: bytes) -> List[str]:
+    """Names of every tensor in the serialised ModelProto whose data lives in another file.
+
+    Raises :class:`OnnxFormatError` when the bytes are not a protobuf message.
+    """
+    found: List[str] = []
+    data = memoryview(model).tobytes() if not isinstance(model, bytes) else model
+    for number, wire, value in _fields(data):
+        if wire != 2:
+            continue
+        if number == _MODEL_GRAPH:
+            _graph(value, found, 0)
+        elif number == _MODEL_FUNCTIONS:
+            for field, kind, node in _fields(value):
+                if field == _FUNCTION_NODE and kind == 2:
+                    _node(node, found, 0)
+    return found
+
+
 def _dims(value_info) -> List[Optional[int]]:
     """An onnxruntime NodeArg's shape, with symbolic (dynamic) dims as None."""
     return [dim if isinstance(dim, int) else None for dim in value_info.shape]
@@ -159,9 +294,13 @@ class OnnxPolicy:
             raise ValueError(f"policy path must end in .json or .onnx, got {str(path)!r}")
         if not json_path.is_file():
             raise ValueError(f"policy metadata file {str(json_path)!r} does not exist")
+        size = json_path.stat().st_size
+        if size > MAX_METADATA_BYTES:
+            raise ValueError(f"{json_path}: {size} bytes is too big for policy metadata "
+                             f"(at most {MAX_METADATA_BYTES}); is it the right file?")
         try:
             meta = json.loads(json_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
             raise ValueError(f"{json_path}: not valid JSON: {error}") from error
         validate_metadata(meta, source=str(json_path))
         onnx_path = json_path.parent / meta["onnx_file"]
@@ -169,12 +308,21 @@ class OnnxPolicy:
             raise ValueError(f"{json_path}: 'onnx_file' is {meta['onnx_file']!r}, expected {path.name!r}")
         if not onnx_path.is_file():
             raise ValueError(f"{json_path}: ONNX file {str(onnx_path)!r} (from 'onnx_file') does not exist")
-        digest = sha256_of_file(onnx_path)
+        # read once: the bytes that are hashed are the bytes onnxruntime loads (no swap in between)
+        model = onnx_path.read_bytes()
+        digest = hashlib.sha256(model).hexdigest()
         if digest != meta["onnx_sha256"]:
             raise ValueError(f"{onnx_path}: SHA-256 is {digest}, but {json_path.name} expects {meta['onnx_sha256']} "
                              "(the ONNX file was modified or belongs to another export)")
         try:
-            session = ort.InferenceSession(str(onnx_path), providers=providers or ["CPUExecutionProvider"])
+            external = external_tensors(model)
+        except OnnxFormatError as error:
+            raise ValueError(f"{onnx_path}: not an ONNX model ({error})") from error
+        if external:
+            raise ValueError(f"{onnx_path}: tensors {external[:5]} keep their data in other files, which "
+                             f"onnx_sha256 does not cover; export the policy with its weights inside the .onnx")
+        try:
+            session = ort.InferenceSession(model, providers=providers or ["CPUExecutionProvider"])
         except Exception as error:  # onnxruntime raises its own exception types
             raise ValueError(f"{onnx_path}: onnxruntime cannot load it: {error}") from error
         cls._check_graph(session, meta, onnx_path)

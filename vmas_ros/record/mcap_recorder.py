@@ -176,8 +176,11 @@ class McapRecorder:
         self._paths: List[Path] = []
         self._file: Optional[_OpenFile] = None
         self._closed = False
-        self._open_next()
-        atexit.register(self.close)
+        # a signal between creating the file and registering the atexit close would leave a
+        # header-only file nobody finishes (seen with SIGINT during sim_node's start-up)
+        with self._deferred_signals():
+            self._open_next()
+            atexit.register(self.close)
 
     # ------------------------------------------------------------- properties
     @property

@@ -142,6 +142,7 @@ def recover(
                         raise ValueError("a second header record")
                     header = record
                     writer = start(record.profile, record.library)
+                    report["bytes_used"] = source.pos
                     continue
                 if writer is None:  # tolerate nothing before the header
                     raise ValueError(f"expected the header record first, found {type(record).__name__}")

@@ -24,7 +24,7 @@ and the other envs keep the fallback action.
 from __future__ import annotations
 
 import math
-from typing import Tuple
+from typing import Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
@@ -33,6 +33,31 @@ from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 from vmas_ros.simulator.dynamics.holonomic import Holonomic
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation
 from vmas_ros.simulator.dynamics.kinematic_bicycle import KinematicBicycle
+
+
+#: largest accepted |component| of a command (m/s, rad/s). Far above any simulated agent's speed,
+#: so no real command is refused; a bigger value is a sender's bug (units, uninitialised memory),
+#: and values past float32's range (3.4e38) would turn into inf and then NaN in the controller.
+MAX_COMMAND = 1e6
+COMMAND_FIELDS = ("linear.x", "linear.y", "angular.z")
+
+
+def check_command(values: Sequence[float], fields: Sequence[str] = COMMAND_FIELDS) -> Optional[Tuple[str, str]]:
+    """Why a velocity command cannot be used, as (kind, details); None when it can.
+
+    ``kind`` is "with NaN or inf" or "with huge values"; ``details`` names each
+    bad component with its value and what was expected. Such a command is
+    dropped, not clamped: clamping would turn garbage into full speed, while
+    dropping keeps the last good command (until ``cmd_vel_timeout``) or the
+    fallback control, and the simulation state stays finite.
+    """
+    bad = [f"{field}={value!r}" for field, value in zip(fields, values)
+           if not isinstance(value, (int, float)) or not math.isfinite(value) or abs(value) > MAX_COMMAND]
+    if not bad:
+        return None
+    non_finite = any(isinstance(v, (int, float)) and not math.isfinite(v) for v in values)
+    kind = "with NaN or inf" if non_finite else "with huge values"
+    return kind, f"{', '.join(bad)}; expected finite values with |value| <= {MAX_COMMAND:g}"
 
 
 def body_to_world(vx: Tensor, vy: Tensor, yaw: Tensor) -> Tuple[Tensor, Tensor]:
@@ -101,3 +126,29 @@ def _bicycle_steering(dynamics: KinematicBicycle, speed: Tensor, yaw_rate: Tenso
     steering = torch.atan(torch.tan(beta) * (dynamics.l_f + dynamics.l_r) / dynamics.l_r)
     limit = float(dynamics.max_steering_angle)
     return steering.clamp(-limit, limit) if math.isfinite(limit) else steering
+
+
+class CommandGate:
+    """Checks every incoming velocity command (ROS or Foxglove) and names the bad ones.
+
+    One warning per agent at most every ``period`` seconds: a broken teleop
+    publishes at tens of Hz, and one line per agent says enough.
+    """
+
+    def __init__(self, logger, agent_names: Sequence[str], period: float = 2.0) -> None:
+        self.logger, self.names, self.period = logger, list(agent_names), period
+        self._warned: dict = {}  # agent index -> monotonic time of its last warning
+
+    def refuse(self, agent_index: int, values: Sequence[float], source: str) -> bool:
+        """True, after a throttled warning naming the agent, source and values, when the command is unusable."""
+        import time
+
+        problem = check_command(values)
+        if problem is None:
+            return False
+        now = time.monotonic()
+        if now - self._warned.get(agent_index, -math.inf) > self.period:
+            self._warned[agent_index] = now
+            kind, details = problem
+            self.logger.warning(f"dropped a cmd_vel {kind} for {self.names[agent_index]} ({source}): {details}")
+        return True

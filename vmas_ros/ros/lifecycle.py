@@ -1,23 +1,48 @@
-"""How our nodes start and stop: refused parameters exit 2, signals exit 0, nothing half torn down.
+"""How our nodes start and stop: refused parameters exit 2, a failed step exits 3, signals exit 0.
 
-sim_node and policy_node share this so that both behave the same for users
-and launch files: a ``ConfigError`` raised while the node is built prints the
-reason and exits with code 2; SIGINT/SIGTERM (KeyboardInterrupt or an
-external shutdown) exit with 0 after the node is destroyed.
+sim_node and policy_node share this so that both behave the same for users,
+launch files and supervisors (systemd, a launch ``on_exit`` handler), which
+can tell the three apart by the exit code alone:
+
+* a ``ConfigError`` raised while the node is built prints the reason and exits
+  with code 2 (:data:`EXIT_CONFIG`): fix the parameters;
+* a ``SimulationFault`` raised from a callback (a scenario or policy that
+  crashed or produced NaN) prints the cause's traceback, then one line saying
+  what failed, and exits with code 3 (:data:`EXIT_FAULT`): the node stops
+  rather than publish garbage, and its bag is still finished;
+* SIGINT/SIGTERM (KeyboardInterrupt or an external shutdown) exit with 0.
+
+In every case the node is destroyed before rclpy shuts down, which is where
+sim_node closes its bag: the bag is complete whichever way the node stops
+(except SIGKILL; see ``vmas-ros bag-recover``).
 """
 from __future__ import annotations
 
 import signal
 import sys
+import traceback
 from typing import Callable, List, Optional
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
+#: exit code for parameters refused at start
+EXIT_CONFIG = 2
+#: exit code for a node stopped by a SimulationFault (a crashed scenario or policy)
+EXIT_FAULT = 3
+
 
 class ConfigError(ValueError):
     """Start-up parameters were refused; the message says which and why."""
+
+
+class SimulationFault(RuntimeError):
+    """A step cannot go on: the scenario or the policy raised, or produced non-finite values.
+
+    The message is meant for the user and says what failed, at which step and
+    what was (not) published; the original exception, if any, is ``__cause__``.
+    """
 
 
 def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]] = None) -> int:
@@ -30,7 +55,12 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
         rclpy.spin(node)
     except ConfigError as error:
         print(f"{name}: refused parameters: {error}", file=sys.stderr)
-        code = 2
+        code = EXIT_CONFIG
+    except SimulationFault as error:
+        if error.__cause__ is not None:  # where the scenario or policy failed, for its author
+            traceback.print_exception(error.__cause__, file=sys.stderr)
+        print(f"{name}: stopped: {error}", file=sys.stderr)
+        code = EXIT_FAULT
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 0
     except Exception:
@@ -43,4 +73,6 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if code == EXIT_FAULT and node is not None and getattr(node, "recorder", None) is not None:
+        print(f"{name}: the bag {node.recorder.paths[-1]} is closed and readable", file=sys.stderr)
     return code

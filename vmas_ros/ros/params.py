@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import yaml
 
@@ -16,6 +16,15 @@ import yaml
 RUNTIME = {"env_index", "cmd_vel_timeout", "control", "real_time_factor", "rate_hz"}
 CONTROL_MODES = ("zero", "heuristic", "policy")
 DEVICES = ("cpu", "cuda", "auto")
+#: upper bounds that catch garbage (1e12 envs, a period rclpy cannot hold in int64 ns) before it runs
+MAX_NUM_ENVS = 10_000_000
+MAX_LIDAR_RAYS = 4096
+MAX_SEED = 2**32 - 1  # numpy's RandomState takes seeds in [0, 2**32)
+#: positive rates / time factors live in this range (0 keeps its "off" meaning where documented):
+#: rclpy turns 1/rate seconds into int64 nanoseconds, so 1e-12 Hz would overflow and kill the node
+MIN_RATE, MAX_RATE = 1e-3, 1e6
+#: parameters that name files: read once at start, never changed at runtime by a remote peer
+PATH_PARAMETERS = ("record_path", "policy_path")
 
 
 @dataclass
@@ -101,8 +110,10 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
             return f"scenario_kwargs must be a JSON/YAML-flow object like '{{\"n_agents\": 4}}': {error}"
         if not isinstance(parsed, dict):
             return f"scenario_kwargs must be a mapping, got {type(parsed).__name__}"
-    if name == "num_envs" and value < 1:
-        return f"num_envs must be >= 1, got {value}"
+    if name == "num_envs" and not 1 <= value <= MAX_NUM_ENVS:
+        return f"num_envs must be in [1, {MAX_NUM_ENVS}], got {value}"
+    if name == "seed" and not 0 <= value <= MAX_SEED:
+        return f"seed must be in [0, {MAX_SEED}], got {value}"
     if name == "env_index":
         limit = current.num_envs if current is not None else None
         if value < 0 or (limit is not None and value >= limit):
@@ -111,8 +122,10 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
         return f"device must be one of {', '.join(DEVICES)} or cuda:N, got {value!r}"
     if name in ("rate_hz", "real_time_factor", "cmd_vel_timeout") and value < 0:
         return f"{name} must be >= 0, got {value}"
-    if name == "lidar_rays" and value < 1:
-        return f"lidar_rays must be >= 1, got {value}"
+    if name in ("rate_hz", "real_time_factor") and value != 0 and not MIN_RATE <= value <= MAX_RATE:
+        return f"{name} must be 0 (off) or in [{MIN_RATE:g}, {MAX_RATE:g}], got {value}"
+    if name == "lidar_rays" and not 1 <= value <= MAX_LIDAR_RAYS:
+        return f"lidar_rays must be in [1, {MAX_LIDAR_RAYS}], got {value}"
     if name == "lidar_range" and value <= 0:
         return f"lidar_range must be > 0, got {value}"
     if name == "frame_id" and not value:
@@ -123,18 +136,80 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
         return "foxglove_host must not be empty (127.0.0.1 keeps the server private to this machine)"
     if name in ("record_max_mb", "record_max_duration_s") and value < 0:
         return f"{name} must be >= 0 (0: no split), got {value}"
-    if name == "record_path" and value and not value.endswith(".mcap"):
-        return f"record_path must end in .mcap, got {value!r}"
+    if name == "record_path" and value:
+        return _check_record_path(value)
     if name == "control" and value not in CONTROL_MODES:
         return f"control must be one of {', '.join(CONTROL_MODES)}, got {value!r}"
     if name == "control" and value == "policy" and current is not None and not current.policy_path:
         return "control: policy needs policy_path (an exported policy's .json), set when the node starts"
     if name == "policy_path" and value:
-        import os
-
-        if not os.path.isfile(value):
-            return f"policy_path must name an existing file (an exported policy's .json), got {value!r}"
+        return _check_policy_path(value, "an exported policy's .json")
     return None
+
+
+def _check_record_path(value: str) -> Optional[str]:
+    """Why the bag cannot go to ``value``: the bag and its split parts stay exactly where the user pointed.
+
+    The recorder writes ``value`` and ``<stem>_<n>.mcap`` beside it, creating
+    missing parent directories. A symlink at ``value`` (even a dangling one)
+    would send the write somewhere else, so it is refused, as is a path whose
+    last part is not a ``.mcap`` file name.
+    """
+    import os
+
+    if "\0" in value:
+        return f"record_path must not contain NUL bytes, got {value!r}"
+    if not value.endswith(".mcap") or os.path.basename(value) in ("", ".mcap"):
+        return f"record_path must be a file name ending in .mcap, got {value!r}"
+    if os.path.islink(value):
+        return f"record_path {value!r} is a symlink (to {os.readlink(value)!r}); give the real path"
+    if os.path.isdir(value):
+        return f"record_path {value!r} is a directory; give a file name ending in .mcap"
+    return None
+
+
+def _check_policy_path(value: str, what: str) -> Optional[str]:
+    """Why ``value`` is no usable policy file name: an existing regular file ending in .json or .onnx."""
+    import os
+
+    if "\0" in value:
+        return f"policy_path must not contain NUL bytes, got {value!r}"
+    if not value.endswith((".json", ".onnx")):
+        return f"policy_path must end in .json or .onnx ({what}), got {value!r}"
+    if not os.path.isfile(value):
+        return f"policy_path must name an existing file ({what}), got {value!r}"
+    if not os.access(value, os.R_OK):
+        return f"policy_path {value!r} is not readable by this user"
+    return None
+
+
+def unknown_parameters(given: Iterable[str], known: Sequence[str], node: str) -> Tuple[List[str], List[str]]:
+    """Errors and warnings for parameter overrides the node does not declare.
+
+    A name close to a known one (``num_env``) is a typo: an error, because the
+    node would otherwise run silently with the default. Other names only get a
+    warning: a shared ``/**`` parameter file may carry values for other nodes.
+    A nested key under a known name (``num_envs.a``: a mapping in a parameter
+    file) is an error; ``qos_overrides.*`` belongs to rclpy and is left alone.
+    """
+    import difflib
+
+    errors, warnings = [], []
+    for name in sorted(set(given) - set(known)):
+        if name.startswith("qos_overrides."):
+            continue
+        root = name.split(".")[0]
+        if root in known:  # a mapping in a parameter file: rcl flattens {num_envs: {a: 1}} to num_envs.a
+            errors.append(f"{root} must be a single value, got a nested key {name!r}")
+            continue
+        if "." in name:
+            continue
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
+        if close:
+            errors.append(f"unknown parameter {name!r} (did you mean {close[0]!r}?)")
+        else:
+            warnings.append(f"{node} ignores unknown parameter {name!r}; known: {', '.join(known)}")
+    return errors, warnings
 
 
 def resolve_device(device: str) -> str:
@@ -152,6 +227,8 @@ def resolve_device(device: str) -> str:
 #: policy_node parameters that may change while it runs; the others need a restart
 POLICY_NODE_RUNTIME = {"rate_hz", "observation_timeout", "cmd_vel_scale"}
 POLICY_OUTPUTS = ("action", "cmd_vel")
+#: a policy runs at most this often (one ONNX call per tick); more is a unit mistake (ms for Hz)
+MAX_POLICY_RATE = 1000.0
 
 
 @dataclass
@@ -185,14 +262,15 @@ def validate_policy_node(name: str, value: Any) -> Optional[str]:
     if expected[name] == "str" and not isinstance(value, str):
         return f"{name} must be a string, got {value!r}"
     if name == "policy_path":
-        import os
-
-        if not value or not os.path.isfile(value):
-            return f"policy_path must name an existing file (an exported policy's .json or .onnx), got {value!r}"
+        if not value:
+            return "policy_path must name an existing file (an exported policy's .json or .onnx), got ''"
+        return _check_policy_path(value, "an exported policy's .json or .onnx")
     if name == "output" and value not in POLICY_OUTPUTS:
         return f"output must be one of {', '.join(POLICY_OUTPUTS)}, got {value!r}"
-    if name in ("rate_hz", "observation_timeout") and value <= 0:
+    if name in ("rate_hz", "observation_timeout", "cmd_vel_scale") and value <= 0:
         return f"{name} must be > 0, got {value}"
+    if name == "rate_hz" and not MIN_RATE <= value <= MAX_POLICY_RATE:
+        return f"rate_hz must be in [{MIN_RATE:g}, {MAX_POLICY_RATE:g}], got {value}"
     if name == "adapter" and value and (value.count(":") != 1 or not all(value.split(":"))):
         return f"adapter must be 'package.module:Class' (empty: the agents' observation topics), got {value!r}"
     if name == "adapter_kwargs":
@@ -203,3 +281,26 @@ def validate_policy_node(name: str, value: Any) -> Optional[str]:
         if not isinstance(parsed, dict):
             return f"adapter_kwargs must be a mapping, got {type(parsed).__name__}"
     return None
+
+
+# ------------------------------------------------------------------ start-up
+def run_checked(name: str, make_node, argv: Optional[List[str]] = None) -> int:
+    """``lifecycle.run_node``, with command-line and parameter-file errors refused like bad values.
+
+    ``rclpy.init`` parses ``--ros-args`` itself: a missing, unreadable or
+    corrupt ``--params-file`` or a malformed ``-p`` raises ``RCLError`` before
+    any node exists. That is a user's input error, so it exits with code 2 and
+    rcl's message (which names the file or rule), not a traceback.
+    """
+    import sys
+
+    from vmas_ros.ros.lifecycle import run_node
+
+    try:
+        return run_node(name, make_node, argv)
+    except Exception as error:
+        text = str(error)
+        if type(error).__name__ != "RCLError" or "failed to initialize rcl" not in text:
+            raise
+        print(f"{name}: refused arguments: {text.split(', at ')[0]}", file=sys.stderr)
+        return 2

@@ -28,6 +28,8 @@ import numpy as np
 import torch
 from std_msgs.msg import Float32, Float32MultiArray, MultiArrayDimension
 
+from vmas_ros.ros.lifecycle import SimulationFault
+
 #: seconds between two warnings about dropped actions (a broken publisher floods)
 WARN_PERIOD = 2.0
 
@@ -102,6 +104,8 @@ class AgentTopics:
         parts = rows + ([r[env_index].reshape(1).float() for r in rewards] if rewards is not None else [])
         with torch.no_grad():
             host = torch.cat([p.float() for p in parts]).cpu().numpy()
+        if np.isnan(host).any():  # checked before any of them is sent: no NaN leaves the node
+            raise SimulationFault(f"NaN in the observations or rewards of env {env_index}: {self._nan_names(host, sizes)}")
         if sizes != [v.size for v in self.obs_views]:
             self._shape(sizes)
         offset = 0
@@ -113,6 +117,16 @@ class AgentTopics:
             for i, msg in enumerate(self.reward_msgs):
                 msg.data = float(host[offset + i])
                 self.send(self.reward_pubs[i], msg)
+
+    def _nan_names(self, host: np.ndarray, sizes: List[int]) -> str:
+        """Which of the gathered vectors (observations, then rewards) hold NaN."""
+        names, offset = [], 0
+        for name, size in [(f"{n}/observation", s) for n, s in zip(self.names, sizes)] + \
+                [(f"{n}/reward", 1) for n in self.names]:
+            if offset < host.size and np.isnan(host[offset:offset + size]).any():
+                names.append(name)
+            offset += size
+        return ", ".join(names)
 
     # -------------------------------------------------------------- actions
     def _on_action(self, index: int, msg: Float32MultiArray) -> None:
@@ -131,9 +145,10 @@ class AgentTopics:
             return
         self._warned[index] = now
         why = f"{values.size} values" if values.size != expected else "NaN or inf"
+        shown = ", ".join(f"{v:g}" for v in values[:8]) + (", ..." if values.size > 8 else "")
         self.node.get_logger().warning(
             f"dropped an action for {self.names[index]} on {self.action_subs[index].topic_name}: "
-            f"expected {expected} finite values, got {why}"
+            f"expected {expected} finite values, got {why} ([{shown}])"
         )
 
     def clear(self) -> None:
@@ -228,6 +243,13 @@ def policy_warnings(policy, scenario: str, kwargs: dict) -> List[str]:
     return notes
 
 
+def _nan_where(values: torch.Tensor) -> str:
+    """Which agents got NaN in how many envs, e.g. "for agent 1 in 3 of 4 envs" ([B, A, ...] values)."""
+    bad = torch.isnan(values.reshape(values.shape[0], values.shape[1], -1)).any(dim=2)  # [B, A]
+    agents = [str(i) for i in torch.nonzero(bad.any(dim=0)).flatten().tolist()]
+    return f"for agent(s) {', '.join(agents)} in {int(bad.any(dim=1).sum())} of {values.shape[0]} envs"
+
+
 def policy_actions(policy, obs: Sequence, bounds: List[Tuple[torch.Tensor, torch.Tensor]]) -> List[torch.Tensor]:
     """Actions of every agent in every env from one batched policy call, clamped to the action range."""
     with torch.no_grad():
@@ -235,7 +257,8 @@ def policy_actions(policy, obs: Sequence, bounds: List[Tuple[torch.Tensor, torch
         device = batch.device
         out = policy.act(np.ascontiguousarray(batch.cpu().numpy()))  # [B, A, act]
         actions = torch.as_tensor(np.asarray(out, dtype=np.float32), device=device)
-        actions = torch.nan_to_num(actions, nan=0.0)  # a NaN output: no push; +-inf: clamped below
+        if torch.isnan(actions).any():  # a broken policy: stop rather than act on made-up values
+            raise SimulationFault(f"the policy returned NaN actions {_nan_where(actions)}")
         lows = torch.stack([b[0] for b in bounds]).unsqueeze(0)
         highs = torch.stack([b[1] for b in bounds]).unsqueeze(0)
         actions = torch.maximum(torch.minimum(actions, highs), lows)

@@ -27,8 +27,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from vmas_ros.ros.adapters import load_adapter
 from vmas_ros.ros.convert import unique_names
-from vmas_ros.ros.lifecycle import ConfigError, run_node
-from vmas_ros.ros.params import POLICY_NODE_RUNTIME, PolicyNodeParams, validate_policy_node
+from vmas_ros.ros.lifecycle import ConfigError
+from vmas_ros.ros.params import (POLICY_NODE_RUNTIME, PolicyNodeParams, run_checked, unknown_parameters,
+                                validate_policy_node)
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: accepts reliable and best-effort publishers (sensor drivers often publish best effort)
@@ -72,7 +73,11 @@ class PolicyNode(Node):
     # ----------------------------------------------------------------- set-up
     def _read_params(self) -> PolicyNodeParams:
         values = {name: self.get_parameter(name).value for name in PolicyNodeParams.names()}
-        errors = [error for name, value in values.items() if (error := validate_policy_node(name, value))]
+        overrides = [n for n in getattr(self, "_parameter_overrides", {}) if not self.has_parameter(n)]
+        errors, notes = unknown_parameters(overrides, PolicyNodeParams.names(), "policy_node")
+        for note in notes:
+            self.get_logger().warning(note)
+        errors += [error for name, value in values.items() if (error := validate_policy_node(name, value))]
         if errors:
             raise ConfigError("; ".join(errors))
         for name in ("rate_hz", "observation_timeout", "cmd_vel_scale"):
@@ -115,6 +120,7 @@ class PolicyNode(Node):
                 return SetParametersResult(successful=False,
                                            reason=f"{parameter.name} cannot change while running; restart the node")
             if error := validate_policy_node(parameter.name, parameter.value):
+                self.get_logger().warning(f"refused parameter change: {error}")
                 return SetParametersResult(successful=False, reason=error)
         for parameter in parameters:
             setattr(self.params, parameter.name, float(parameter.value))
@@ -183,7 +189,7 @@ class PolicyNode(Node):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of ``ros2 run vmas_ros policy_node`` (and ``policy_node`` on PATH)."""
-    return run_node("policy_node", PolicyNode, argv)
+    return run_checked("policy_node", PolicyNode, argv)
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ import sys
 import time
 from typing import Dict, List, Optional
 
+import numpy as np
 import torch
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
@@ -30,11 +31,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 import vmas_ros
 from vmas_ros.ros import convert
-from vmas_ros.ros.command import command_to_action
-from vmas_ros.ros.lifecycle import ConfigError, run_node
-from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, validate
+from vmas_ros.ros.command import CommandGate, command_to_action
+from vmas_ros.ros.lifecycle import ConfigError, SimulationFault
+from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, run_checked, unknown_parameters, validate
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
 from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
+from vmas_ros.ros.topic_audit import TopicAudit
 from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.sensors import Lidar
 
@@ -86,7 +88,7 @@ class SimNode(Node):
         self.steps = 0
         self._dt_ns = round(self.env.world.dt * 1e9)
         self._commands: Dict[int, tuple] = {}  # agent index -> (vx, vy, wz, wall time)
-        self._nonfinite_warned = 0.0
+        self._command_gate = CommandGate(self.get_logger(), self.agent_names)  # NaN/inf/huge: dropped, named
         self.rewards = None
         self.foxglove = self._start_foxglove()
         self.recorder = self._start_recorder()
@@ -101,7 +103,11 @@ class SimNode(Node):
     # ----------------------------------------------------------------- parameters
     def _read_params(self) -> SimParams:
         values = {name: self.get_parameter(name).value for name in SimParams.names()}
-        errors = [error for name in SimParams.names() if (error := validate(name, values[name]))]
+        overrides = [n for n in getattr(self, "_parameter_overrides", {}) if not self.has_parameter(n)]
+        errors, notes = unknown_parameters(overrides, SimParams.names(), "sim_node")
+        for note in notes:
+            self.get_logger().warning(note)
+        errors += [error for name in SimParams.names() if (error := validate(name, values[name]))]
         params = SimParams(**values) if not errors else None
         for name in ("env_index", "control") if params is not None else ():
             if error := validate(name, getattr(params, name), params):
@@ -182,6 +188,7 @@ class SimNode(Node):
         self.agent_topics = AgentTopics(self, self.env, self.agent_names, RELIABLE, ACCEPT_ANY, self._send,
                                         on_action=self._record_received)
         self.learned = self._load_policy()
+        self.topic_audit = TopicAudit.of_sim_node(self, self.agent_names, self.params.use_stamped_cmd_vel)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
@@ -245,6 +252,8 @@ class SimNode(Node):
 
     def _on_foxglove_twist(self, agent_index: int, vx: float, vy: float, wz: float) -> None:
         # runs on the Foxglove server's thread: one dict assignment, read by the step
+        if self._command_gate.refuse(agent_index, (vx, vy, wz), "Foxglove"):
+            return
         self._commands[agent_index] = (vx, vy, wz, time.monotonic())
         if self.recorder is not None:
             twist = Twist()
@@ -261,14 +270,9 @@ class SimNode(Node):
     # ------------------------------------------------------------------ commands
     def _on_cmd_vel(self, agent_index: int, msg) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
-        values = convert.finite_twist(twist)
-        if values is None:
-            now = time.monotonic()
-            if now - self._nonfinite_warned > 2.0:  # throttled: a broken teleop floods
-                self._nonfinite_warned = now
-                self.get_logger().warning(
-                    f"dropped a cmd_vel with NaN or inf for {self.agent_names[agent_index]}"
-                )
+        values = (twist.linear.x, twist.linear.y, twist.angular.z)
+        topic = f"{self.get_namespace().rstrip('/')}/{self.agent_names[agent_index]}/cmd_vel"
+        if self._command_gate.refuse(agent_index, values, topic):
             return
         self._commands[agent_index] = (*values, time.monotonic())
         self._record_received(f"{self.agent_names[agent_index]}/cmd_vel", msg)
@@ -310,18 +314,50 @@ class SimNode(Node):
                 self.step_once()
 
     def step_once(self) -> None:
-        phases = self.phases
-        start = time.perf_counter() if phases is not None else 0.0
-        actions = self._actions()
-        if phases is not None:
-            phases.add("actions", start)
-            start = time.perf_counter()
-        self.lidar_readings.mark()  # a reading the scenario takes during the step is reused, not cast again
-        self.obs, self.rewards, _, _ = self.env.step(actions)
-        self.steps += 1
-        if phases is not None:
-            phases.add("engine", start)
-        self._publish()
+        """One step: actions, ``env.step``, publish. A failure in any part raises
+        SimulationFault saying which part and whether anything of the step went out,
+        so that the node stops (exit code 3) instead of publishing garbage."""
+        stage = "actions"
+        try:
+            phases = self.phases
+            start = time.perf_counter() if phases is not None else 0.0
+            actions = self._actions()
+            if phases is not None:
+                phases.add("actions", start)
+                start = time.perf_counter()
+            stage = "engine"
+            self.lidar_readings.mark()  # a reading the scenario takes during the step is reused, not cast again
+            self.obs, self.rewards, _, _ = self.env.step(actions)
+            self.steps += 1
+            if phases is not None:
+                phases.add("engine", start)
+            stage = "publish"
+            self._publish()
+        except Exception as error:
+            if not self.context.ok():  # a publish raced the shutdown a signal started: not a fault
+                raise
+            raise self._fault(stage, error) from (error.__cause__ if isinstance(error, SimulationFault) else error)
+
+    def _fault(self, stage: str, error: Exception) -> SimulationFault:
+        """A SimulationFault naming the step, the failing part and what was published."""
+        p = self.params
+        part = {
+            "actions": f"computing the actions (control: {p.control}"
+                       + (f", policy {p.policy_path}" if p.control == "policy" else "") + ")",
+            "engine": f"the scenario {p.scenario!r} (Environment.step)",
+            "publish": f"the state scenario {p.scenario!r} produced" if isinstance(error, SimulationFault)
+                       else "publishing the new state",
+        }[stage]
+        what = str(error) if isinstance(error, SimulationFault) else f"{type(error).__name__}: {error}"
+        what = " ".join(what.split())  # one line: onnxruntime's messages span several
+        step = self.steps if stage == "publish" else self.steps + 1
+        if stage != "publish":
+            kept = "nothing of this step was published or recorded"
+        elif isinstance(error, SimulationFault):  # our own finiteness checks run before the values go out
+            kept = "no non-finite value was published; this step was not recorded"
+        else:
+            kept = "part of this step may have been published; none of it was recorded"
+        return SimulationFault(f"step {step} (t={step * self._dt_ns / 1e9:.3f} s) failed in {part}: {what}; {kept}")
 
     def _publish(self) -> None:
         self._step_records = []
@@ -357,6 +393,7 @@ class SimNode(Node):
             phases.add("lidar", start)
             start = time.perf_counter()
         snap = convert.Snapshot.take(world, p.env_index, self.lidars, readings)
+        self._check_finite(snap)
         colours = None
         if self._per_env_colours:  # e.g. goal colours drawn per env at reset
             colours = [c for k in self._per_env_colours for c in convert.rgb(world.entities[k].color, p.env_index)]
@@ -376,6 +413,18 @@ class SimNode(Node):
         if phases is not None:
             phases.add("publish", start)
             phases.steps += 1
+
+    def _check_finite(self, snap) -> None:
+        """Refuse (SimulationFault) a NaN/inf pose or velocity, or a NaN scan, before any is published."""
+        if np.isfinite(snap.pos).all() and np.isfinite(snap.vel).all() and np.isfinite(snap.rot).all() \
+                and np.isfinite(snap.ang_vel).all() and not any(np.isnan(s).any() for ss in snap.scans.values() for s in ss):
+            return
+        entities = self.env.world.entities
+        bad = [entities[k].name for k in range(len(entities))
+               if not (np.isfinite(snap.pos[k]).all() and np.isfinite(snap.vel[k]).all()
+                       and np.isfinite(snap.rot[k]) and np.isfinite(snap.ang_vel[k]))]
+        bad += [f"{self.agent_names[i]}'s scan" for i, ss in snap.scans.items() if any(np.isnan(s).any() for s in ss)]
+        raise SimulationFault(f"non-finite state in env {self.params.env_index}: {', '.join(bad)}")
 
     def _publish_tf(self, snap) -> None:
         """/tf where tf2_msgs exists; without it, only the bag gets /tf (serialised from its definition)."""
@@ -430,7 +479,7 @@ class SimNode(Node):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of ``ros2 run vmas_ros sim_node`` (and ``sim_node`` on PATH)."""
-    return run_node("sim_node", SimNode, argv)
+    return run_checked("sim_node", SimNode, argv)
 
 
 if __name__ == "__main__":

@@ -35,6 +35,12 @@ call ``on_twist(agent_index, vx, vy, wz)`` (body frame, REP 103). Anything
 else (bad JSON, unknown topic or channel, non-finite values, payloads over
 64 KiB, other encodings) is dropped with a throttled ``logging`` warning.
 
+The SDK itself answers malformed JSON, unknown opcodes, subscriptions to
+unknown channel ids and MessageData on unknown client channels with a status
+message and a log line (rate-limited here, ``SDK_CLIENT_LOGGERS``), and closes
+the connection of a client that sends a frame over 16 MiB; other clients are
+not affected. A client may advertise at most 256 channels.
+
 Threading: ``on_twist`` runs on the SDK's server thread, not the caller's.
 Keep it short and thread-safe (storing the command in a dict is enough);
 exceptions it raises are caught and logged.
@@ -88,6 +94,7 @@ from vmas_ros.ros.convert import ScanGeometry, Snapshot, unique_names, yaw_to_qu
 from vmas_ros.viz.foxglove_messages import (  # noqa: F401 - re-exported (public names and helpers)
     _DISC_HEIGHT,
     _LINE_WIDTH,
+    _MAX_CHANNELS_PER_CLIENT,
     _MAX_CLIENT_CHANNELS,
     _THROTTLE_S,
     MAX_CLIENT_MESSAGE_BYTES,
@@ -108,6 +115,43 @@ from vmas_ros.viz.foxglove_messages import (  # noqa: F401 - re-exported (public
 __all__ = ["FoxgloveBridge", "TwistCallback", "parse_twist", "MAX_CLIENT_MESSAGE_BYTES", "TWIST_SCHEMAS"]
 
 logger = logging.getLogger(__name__)
+
+#: loggers the SDK (Rust, through Python logging) reports bad client input on, one line per message
+SDK_CLIENT_LOGGERS = ("foxglove.websocket.connected_client", "foxglove.websocket.connected_client.poller")
+
+
+class _SdkLogLimit(logging.Filter):
+    """At most ``burst`` records per ``period`` seconds per SDK logger, then one summary.
+
+    The SDK logs every malformed frame, unknown opcode or unknown channel a
+    client sends (and answers it with a status message). A client looping on
+    bad input must not flood the node's log: the first few lines show what is
+    wrong, the rest are counted.
+    """
+
+    def __init__(self, burst: int = 5, period: float = _THROTTLE_S) -> None:
+        super().__init__()
+        self.burst, self.period = burst, period
+        self._window: Dict[str, Tuple[float, int]] = {}  # logger -> (window start, records in it)
+        self._lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        now = time.monotonic()
+        with self._lock:
+            start, count = self._window.get(record.name, (now, 0))
+            if now - start >= self.period:
+                if count > self.burst:
+                    record.msg = f"{record.getMessage()} ({count - self.burst} similar suppressed)"
+                    record.args = ()
+                start, count = now, 0
+            self._window[record.name] = (start, count + 1)
+            return count < self.burst
+
+
+_SDK_LOG_LIMIT = _SdkLogLimit()
+for _name in SDK_CLIENT_LOGGERS:
+    if _SDK_LOG_LIMIT not in logging.getLogger(_name).filters:
+        logging.getLogger(_name).addFilter(_SDK_LOG_LIMIT)
 
 
 def _stop(server) -> None:

@@ -55,7 +55,10 @@ TWIST_SCHEMAS = frozenset({
     "",
 })
 _THROTTLE_S = 2.0
-_MAX_CLIENT_CHANNELS = 4096  # bound on remembered client channels (a client may advertise many)
+_MAX_CLIENT_CHANNELS = 4096  # bound on remembered client channels over all clients
+#: one client's channels beyond this are ignored (never evicting another client's: a client that
+#: advertises thousands of channels must not break someone else's teleop)
+_MAX_CHANNELS_PER_CLIENT = 256
 _DISC_HEIGHT = 0.05  # thickness of the 2D shapes in the 3D panel, as sim_node's markers
 _LINE_WIDTH = 0.02
 
@@ -139,6 +142,7 @@ class _TwistRouter(ServerListener):
             self.topics[f"/{name}/cmd_vel"] = i
             self.topics[f"{name}/cmd_vel"] = i
         self._channels: Dict[Tuple[int, int], Tuple[str, Optional[int]]] = {}
+        self._per_client: Dict[int, int] = {}  # client id -> how many of its channels are remembered
         self._lock = threading.Lock()
         self.throttle = _Throttle()
         self.delivered = 0  # twists passed to on_twist (for tests and diagnostics)
@@ -159,16 +163,32 @@ class _TwistRouter(ServerListener):
                 index = None
                 self.throttle.warn("schema", "foxglove: ignoring %s with schema %r (expected "
                                    "geometry_msgs/msg/Twist)", topic, schema)
+            key = (client.id, channel.id)
             with self._lock:
-                if len(self._channels) >= _MAX_CLIENT_CHANNELS:
-                    self._channels.pop(next(iter(self._channels)))
-                self._channels[(client.id, channel.id)] = (topic, index)
+                count = self._per_client.get(client.id, 0)
+                full = count >= _MAX_CHANNELS_PER_CLIENT or len(self._channels) >= _MAX_CLIENT_CHANNELS
+                if key not in self._channels and full:
+                    refused = True
+                else:
+                    refused = False
+                    if key not in self._channels:
+                        self._per_client[client.id] = count + 1
+                    self._channels[key] = (topic, index)
+            if refused:  # its messages then count as "unknown client channel"
+                self.throttle.warn("limit", "foxglove: ignoring client channel %d (%r): a client may advertise at "
+                                   "most %d channels, %d in all", channel.id, topic, _MAX_CHANNELS_PER_CLIENT,
+                                   _MAX_CLIENT_CHANNELS)
         except Exception:  # never let an error reach the server thread
             logger.exception("foxglove: error handling a client advertisement")
 
     def on_client_unadvertise(self, client, client_channel_id: int) -> None:
-        with self._lock:
-            self._channels.pop((client.id, client_channel_id), None)
+        with self._lock:  # the SDK also calls this for each channel of a client that disconnects
+            if self._channels.pop((client.id, client_channel_id), None) is not None:
+                left = self._per_client.get(client.id, 1) - 1
+                if left > 0:
+                    self._per_client[client.id] = left
+                else:
+                    self._per_client.pop(client.id, None)
 
     def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
         try:
