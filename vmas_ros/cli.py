@@ -15,6 +15,7 @@ Subcommands:
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
     drive   publish a Twist on an agent's cmd_vel for a while
+    soak    long runs: memory growth, NaN/inf, missed steps (engine, or sim_node with bag + Foxglove)
     bag-recover  rebuild a finished MCAP bag from one whose recorder was killed
 """
 from __future__ import annotations
@@ -252,9 +253,11 @@ def build_parser() -> argparse.ArgumentParser:
     drive.add_argument("--wz", type=float, default=0.0, help="yaw rate, rad/s (counter-clockwise)")
     drive.add_argument("--seconds", type=float, default=2.0, help="how long to drive (default 2)")
     drive.set_defaults(func=cmd_drive)
+    from vmas_ros.bench.soak import add_parser as add_soak_parser
     from vmas_ros.record.recover_cli import add_parser as add_bag_recover_parser
 
     add_bag_recover_parser(sub)
+    add_soak_parser(sub)  # vmas-ros soak engine|node
     return parser
 
 

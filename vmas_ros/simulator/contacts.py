@@ -255,8 +255,10 @@ def joint_forces(
     t_a = cross(pax - xa, pay - ya, fx, fy)
     t_b = cross(pbx - xb, pby - yb, -fx, -fy)
     # rotation lock: a stiff exponential spring on the relative angle where rotation is not free
-    delta = ra - (rb + fixed_rotation)
+    # unlocked joints get delta 0 before the exponential: exp of a free joint's accumulated angle
+    # overflows (past ~88.7 rad in float32), and inf * 0 would be NaN (exact for locked ones: delta * 1)
+    delta = (ra - (rb + fixed_rotation)) * joints.locked
     magnitude = delta.abs()
     lock = params.torque_constraint_force * delta.sign() * (torch.exp(magnitude) - 1)
-    lock = lock * mask_ge(magnitude, 1e-9) * joints.locked
+    lock = lock * mask_ge(magnitude, 1e-9)
     return fx, fy, t_a - lock, t_b + lock
