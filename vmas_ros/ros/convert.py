@@ -166,8 +166,3 @@ def unique_names(names: Sequence[str]) -> List[str]:
         result.append(token if count == 0 else f"{token}_{count}")
     return result
 
-
-def finite_twist(twist) -> Optional[tuple]:
-    """(vx, vy, wz) if every component is finite, else None."""
-    values = (twist.linear.x, twist.linear.y, twist.angular.z)
-    return values if all(math.isfinite(v) for v in values) else None

@@ -54,6 +54,11 @@ def mask_le(a: Tensor, b) -> Tensor:
     return torch.le(a, b, out=a.new_empty(_broadcast_shape(a, b)))
 
 
+def mask_lt(a: Tensor, b) -> Tensor:
+    """``a < b`` as float 0/1 (broadcast), without a bool intermediate."""
+    return torch.lt(a, b, out=a.new_empty(_broadcast_shape(a, b)))
+
+
 def mask_gt(a: Tensor, b) -> Tensor:
     """``a > b`` as float 0/1 (broadcast), without a bool intermediate."""
     return torch.gt(a, b, out=a.new_empty(_broadcast_shape(a, b)))
@@ -97,7 +102,7 @@ def soft_contact(
     ``gate`` (float 0/1) switches the contact off where it is 0 (the broad phase).
     """
     sign = -1.0 if attractive else 1.0
-    penetration = torch.logaddexp(dist.new_zeros(()), (dist_min - dist) * sign / margin) * margin
+    penetration = torch.logaddexp(_zero(dist), (dist_min - dist) * sign / margin) * margin
     active = mask_ge(dist, MIN_CONTACT_DIST) * (mask_le(dist, dist_min) if not attractive else mask_ge(dist, dist_min))
     if gate is not None:
         active = active * gate

@@ -1,11 +1,14 @@
-"""The batched physics step: pure functions over ``[n_entities, batch, ...]`` tensors.
+"""The batched physics step: pure functions over planar ``[3, n_entities, batch]`` tensors.
 
-Entity-major on purpose: per-entity constants (mass, limits, masks) then
-broadcast over each entity's contiguous ``[batch, 2]`` block, and gathering a
-pair's members is a copy of whole blocks; batch-major ``[batch, n, 2]`` made
-every broadcast op run two floats at a time, 3x slower than VMAS at 30,000 envs.
+Entity-major and planar on purpose: the state is ``q`` = (x, y, angle) and
+``v`` = (vx, vy, angular velocity), each ``[3, N, B]`` (:class:`PlanarState`),
+so per-entity constants (mass, limits, masks) broadcast as ``[3, N, 1]``
+columns over each entity's contiguous batch, one elementwise op updates every
+coordinate, and gathering a pair's members copies whole blocks. Batch-major
+``[batch, n, 2]`` made every broadcast op run two floats at a time, 3x slower
+than VMAS at 30,000 envs, and ops over a trailing dim of 2 do not vectorise.
 
-One call of :func:`step` advances every env by ``dt`` with ``substeps``
+One call of :func:`step_planar` advances every env by ``dt`` with ``substeps``
 semi-implicit Euler substeps (paper, "The VMAS platform"):
 
     f_i   = f_action + f_gravity + f_friction + sum_j f_contact(i, j) + f_joint
@@ -16,14 +19,13 @@ with the same update for the angle using torques and the moment of inertia.
 Contact forces are the soft penetration force of MPE/VMAS:
 ``c * n * k * log(1 + exp(-(d - d_min) / k))`` while ``d <= d_min``.
 
-Integration works on ``[N, B, 2]`` vectors; the contact and joint kernels
-(:mod:`vmas_ros.simulator.contacts`) work on planar ``[P, B]`` components, where
-their long chains of arithmetic run on contiguous data, and hand back forces
-that are stacked once per kernel for the scatter.
+The contact and joint kernels (:mod:`vmas_ros.simulator.contacts`) work on
+planar ``[P, B]`` components and hand back forces that :func:`_add_pairs`
+adds into the ``[3, N, B]`` force in pair order.
 
 Nothing here loops over envs or entity pairs in Python, and nothing reads a
 tensor back to the host: the number of kernels per step depends only on how
-many shape-pair kinds and joints the world has. That also makes :func:`step`
+many shape-pair kinds and joints the world has. That also makes :func:`step_planar`
 a fixed-shape function that ``torch.compile`` can fuse (``World.compile_physics``).
 """
 from __future__ import annotations
@@ -131,34 +133,6 @@ def clamp_norm(vec: Tensor, max_norm) -> Tensor:
     over = norm > max_norm
     finite_max = torch.where(torch.isfinite(torch.as_tensor(max_norm, device=vec.device)), max_norm, 0.0)
     return torch.where(over, vec / torch.where(over, norm, 1.0) * finite_max, vec)
-
-
-def friction(vel: Tensor, coeff: Tensor, mass: Tensor, sub_dt: float) -> Tensor:
-    """Coulomb-like friction opposing ``vel`` ([.., D] vectors), never strong enough to reverse it in one substep."""
-    speed = torch.linalg.vector_norm(vel, dim=-1, keepdim=True)
-    moving = speed != 0
-    limit = torch.minimum(coeff * mass, vel.abs() / sub_dt * mass)
-    force = -(vel / torch.where(moving, speed, 1e-8)) * limit
-    return torch.where(moving, force, 0.0)
-
-
-def _friction_xy(vx: Tensor, vy: Tensor, coeff: Tensor, mass: Tensor, sub_dt: float) -> Tuple[Tensor, Tensor]:
-    """:func:`friction` on planar components ``[N, B]`` (``coeff``, ``mass``: ``[N, 1]``)."""
-    speed = contacts.norm(vx, vy)
-    moving = contacts.mask_ne(speed, 0.0)
-    inv = moving / (speed + (1 - moving))  # 1/speed where moving, 0 elsewhere (exact)
-    cap = coeff * mass
-    fx = -(vx * inv) * torch.minimum(cap, vx.abs() / sub_dt * mass)
-    fy = -(vy * inv) * torch.minimum(cap, vy.abs() / sub_dt * mass)
-    return fx, fy
-
-
-def _friction_1d(w: Tensor, coeff: Tensor, inertia: Tensor, sub_dt: float) -> Tensor:
-    """Friction torque opposing the angular velocity ``w`` ``[N, B]``."""
-    speed = w.abs()
-    moving = contacts.mask_ne(speed, 0.0)
-    inv = moving / (speed + (1 - moving))
-    return -(w * inv) * torch.minimum(coeff * inertia, speed / sub_dt * inertia)
 
 
 def step(

@@ -28,6 +28,8 @@ from typing import Tuple, Union
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.contacts import mask_gt, mask_lt
+
 
 __all__ = ["ray_sphere", "ray_box", "ray_segment", "ray_sphere_xy", "ray_box_xy", "ray_segment_xy"]
 
@@ -75,20 +77,11 @@ def ray_sphere_xy(
     across = torch.addcmul(to_cx * sin_a, to_cy, cos_a, value=-1)  # signed distance of the centre from the ray line
     offset_sq = across * across
     radius_sq = radius * radius
-    hit = _mask_lt(offset_sq, radius_sq) * _mask_gt(along, 0.0)
+    hit = mask_lt(offset_sq, radius_sq) * mask_gt(along, 0.0)
     # a miss takes the root of 1 (exactly, for finite values): no NaN in the value or its gradient
     half_chord = torch.sqrt((radius_sq - offset_sq) * hit + (1 - hit))
     max_range = _as_tensor(max_range, along)
     return (along - half_chord - max_range) * hit + max_range
-
-
-def _mask_lt(a: Tensor, b) -> Tensor:
-    """``a < b`` as float 0/1 (broadcast to ``a``'s shape), without a bool intermediate."""
-    return torch.lt(a, b, out=torch.empty_like(a))
-
-
-def _mask_gt(a: Tensor, b) -> Tensor:
-    return torch.gt(a, b, out=torch.empty_like(a))
 
 
 def ray_box(
