@@ -52,3 +52,15 @@ def join_xy(x: Tensor, y: Tensor) -> Tensor:
     if x.dtype in (torch.float32, torch.float64) and y.dtype == x.dtype and x.shape == y.shape:
         return torch.view_as_real(torch.complex(x, y))
     return torch.stack([x, y], dim=-1)
+
+
+def as_pairs(vectors: Tensor) -> Tensor:
+    """``[..., 2]`` float vectors viewed as ``[...]`` complex numbers, one per ``(x, y)`` pair (no copy).
+
+    For copies that move whole vectors, such as transposing ``[agents, rows,
+    batch, 2]`` into ``[agents, batch, rows, 2]`` to lay out observations: a
+    strided copy of 8-byte pairs runs about 3x faster than the same copy of
+    4-byte floats with a trailing dim of 2, and moves the same bits. Needs a
+    contiguous last dim and even strides/offset (true of the state stacks).
+    """
+    return torch.view_as_complex(vectors)

@@ -154,12 +154,15 @@ def step(
 
 def step_planar(
     state: PlanarState, tables: WorldTables, params: StepParams, actions: Tensor, fixed_rotation: Optional[Tensor],
+    actions_writable: bool = False,
 ) -> PlanarState:
     """Advance all envs by one ``dt``; ``actions`` is ``[3, N, B]`` (fx, fy, torque, see :func:`stack_actions`).
 
     Pair and joint forces are added with ``index_add`` straight into the
     ``[3, N, B]`` force, so no per-pair ``[P, B, 2]`` vector is ever
     assembled. ``fixed_rotation`` is the joints' ``[J, B, 1]`` target angles.
+    ``actions_writable``: the caller hands ``actions`` over, so the last
+    substep may add contact forces into it instead of into a copy.
     """
     c = step_constants(tables, params)
     q, v = state.q, state.v
@@ -172,7 +175,8 @@ def step_planar(
         if tables.has_gravity:
             force = force + c["gravity"]
         if tables.joints is not None or tables.pairs:
-            force = force.clone() if force is actions else force  # written in place below
+            if force is actions and not (actions_writable and substep == params.substeps - 1):
+                force = force.clone()  # written in place below
             x, y, rot = q[0], q[1], q[2]
         if tables.joints is not None:
             jt = tables.joints
@@ -191,20 +195,16 @@ def step_planar(
                 t_a, t_b = (zero if t is None else t for t in (t_a, t_b))
                 _add_pairs(force, pair.index_ab, torch.stack([fax, fay, t_a]), torch.stack([fbx, fby, t_b]))
 
-        if substep == 0:
-            v = v * c["keep"]
-        new_v = v + force / c["mass"] * c["sub_dt"]  # VMAS's rounding
-        if tables.limits_speed:
-            speed = contacts.norm(new_v[0], new_v[1])
-            over = contacts.mask_gt(speed, c["max_speed"])
-            # VMAS's rounding: v / |v| * max where over the limit
-            limited = new_v[:2] / (speed + (1 - over)) * c["finite_max_speed"]
-            new_v = torch.cat([contacts.select(over, limited, new_v[:2]), new_v[2:]])
-        if tables.limits_velocity:
-            new_v = torch.clamp(new_v, -c["v_range"], c["v_range"])
-        new_q = q + new_v * c["sub_dt"]
-        if params.x_semidim is not None or params.y_semidim is not None:
-            new_q = torch.clamp(new_q, -c["semidims"], c["semidims"])
+        span = c["free_span"]
+        if span is not None and q.numel() > SMALL_BATCH_ELEMENTS:
+            # held entities (landmarks) are one block at an end: integrate only the free block and
+            # put the held rows back with one copy, instead of blending every row with 0/1 masks
+            lo, hi = span
+            free_q, free_v = _integrate(q[:, lo:hi], v[:, lo:hi], force[:, lo:hi], c["free_block"], substep == 0)
+            q = torch.cat([q[:, :lo], free_q] if lo else [free_q, q[:, hi:]], dim=1)
+            v = torch.cat([v[:, :lo], free_v] if lo else [free_v, v[:, hi:]], dim=1)
+            continue
+        new_q, new_v = _integrate(q, v, force, c, substep == 0)
         if c["all_free"]:
             q, v = new_q, new_v
         elif new_q.numel() <= SMALL_BATCH_ELEMENTS:
@@ -214,6 +214,25 @@ def step_planar(
             free, held = c["free"], c["held"]
             q, v = new_q * free + q * held, new_v * free + v0 * held
     return PlanarState(q, v)
+
+
+def _integrate(q: Tensor, v: Tensor, force: Tensor, c: dict, first_substep: bool) -> Tuple[Tensor, Tensor]:
+    """One semi-implicit Euler substep of the rows in ``q``/``v`` (``c``: their constants), limits applied."""
+    if first_substep:
+        v = v * c["keep"]
+    new_v = v + force / c["mass"] * c["sub_dt"]  # VMAS's rounding
+    if c["limits_speed"]:
+        speed = contacts.norm(new_v[0], new_v[1])
+        over = contacts.mask_gt(speed, c["max_speed"])
+        # VMAS's rounding: v / |v| * max where over the limit
+        limited = new_v[:2] / (speed + (1 - over)) * c["finite_max_speed"]
+        new_v = torch.cat([contacts.select(over, limited, new_v[:2]), new_v[2:]])
+    if c["limits_velocity"]:
+        new_v = torch.clamp(new_v, -c["v_range"], c["v_range"])
+    new_q = q + new_v * c["sub_dt"]
+    if c["semidims"] is not None:
+        new_q = torch.clamp(new_q, -c["semidims"], c["semidims"])
+    return new_q, new_v
 
 
 def _add_pairs(force: Tensor, index_ab: Tensor, on_a: Tensor, on_b: Tensor) -> None:
@@ -276,7 +295,35 @@ def step_constants(tables: WorldTables, params: StepParams) -> dict:
         "max_speed": max_speed, "finite_max_speed": torch.where(torch.isfinite(max_speed), max_speed, 0.0),
         "v_range": torch.stack([v_range, v_range, no_limit]),
         "free_bool": free_bool, "free": free, "held": 1 - free, "all_free": bool(free_bool.all()),
-        "semidims": torch.tensor(bounds, dtype=mass.dtype, device=mass.device).reshape(3, 1, 1),
+        "semidims": (None if params.x_semidim is None and params.y_semidim is None
+                     else torch.tensor(bounds, dtype=mass.dtype, device=mass.device).reshape(3, 1, 1)),
+        "limits_speed": tables.limits_speed, "limits_velocity": tables.limits_velocity,
     }
+    cached["free_span"] = span = _free_span(free_bool)
+    cached["free_block"] = None if span is None else _block_constants(cached, *span)
     tables._planar_cache = cached
     return cached
+
+
+def _free_span(free_bool: Tensor) -> Optional[Tuple[int, int]]:
+    """``(lo, hi)`` when entities ``lo:hi`` are free in all three coordinates and every other
+    entity is held in all three, with the held ones one block at an end; else None (also when all are free)."""
+    per_entity = free_bool[..., 0]  # [3, N]
+    whole = per_entity.all(dim=0)
+    if not bool((per_entity == whole).all()) or bool(whole.all()) or not bool(whole.any()):
+        return None
+    rows = whole.nonzero()[:, 0].tolist()
+    lo, hi = rows[0], rows[-1] + 1
+    if hi - lo != len(rows) or (lo != 0 and hi != whole.numel()):
+        return None
+    return lo, hi
+
+
+def _block_constants(c: dict, lo: int, hi: int) -> dict:
+    """The constants of :func:`_integrate` for entities ``lo:hi`` only."""
+    block = dict(c)
+    for name in ("keep", "max_speed", "finite_max_speed"):  # [N, 1]
+        block[name] = c[name][lo:hi]
+    for name in ("mass", "v_range"):  # [3, N, 1]
+        block[name] = c[name][:, lo:hi]
+    return block

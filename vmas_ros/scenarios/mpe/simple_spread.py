@@ -24,6 +24,7 @@ import torch
 
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.layout import as_pairs
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import Color, ScenarioUtils
 
@@ -56,7 +57,7 @@ class Scenario(BaseScenario):
         self._seen_rows_on: dict = {}  # device -> [A, R] index tensor
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._obs_cache = None  # (pos stack, vel stack, observations) of the last state observed
-        self._radius_sums = None
+        self._overlap_sq = None
         return world
 
     def reset_world_at(self, env_index=None) -> None:
@@ -66,27 +67,24 @@ class Scenario(BaseScenario):
             pos = torch.empty(rows, world.dim_p, device=world.device).uniform_(-1.0, 1.0)
             entity.set_pos(pos if env_index is None else pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
-    def _agents_and_landmarks(self):
-        """Entity-major positions [A, B, 2] and [L, B, 2] (views of the world's stacked state)."""
-        stacked = self.world.stacked_state("pos")
-        n_landmarks = len(self.world.landmarks)
-        return stacked[n_landmarks:], stacked[:n_landmarks]
-
     def reward(self, agent: Agent) -> torch.Tensor:
         if agent is self.world.agents[0]:
-            agents, landmarks = self._agents_and_landmarks()
-            n_agents = agents.shape[0]
+            # planar components: squared distances over contiguous [rows, B] blocks vectorise
+            x, y = self.world.stacked_xy("pos")
+            n_landmarks = len(self.world.landmarks)
+            n_agents = x.shape[0] - n_landmarks
+            ax, ay, lx, ly = x[n_landmarks:], y[n_landmarks:], x[:n_landmarks], y[:n_landmarks]
             # each landmark's distance to its nearest agent, summed over landmarks: [A, L, B] -> [B]
-            gaps = torch.linalg.vector_norm(agents.unsqueeze(1) - landmarks.unsqueeze(0), dim=-1)
-            coverage = gaps.amin(dim=0).sum(dim=0)
-            if self._radius_sums is None or self._radius_sums.device != agents.device:
-                radii = torch.tensor([a.shape.radius for a in self.world.agents], device=agents.device)
-                collides = torch.tensor([a.collide for a in self.world.agents], device=agents.device)
-                eligible = collides.view(-1, 1) & ~torch.eye(n_agents, dtype=torch.bool, device=agents.device)
-                # pairs that cannot count get a threshold no distance is below
-                self._radius_sums = torch.where(eligible, radii.view(-1, 1) + radii.view(1, -1), -1.0).unsqueeze(-1)
-            spacing = torch.linalg.vector_norm(agents.unsqueeze(1) - agents.unsqueeze(0), dim=-1)  # [A, A, B]
-            overlaps = (spacing < self._radius_sums).sum(dim=(0, 1))
+            # (sqrt is monotonic, so the nearest agent is found on squared distances)
+            coverage = torch.sqrt(_squared_gaps(ax, ay, lx, ly).amin(dim=0)).sum(dim=0)
+            if self._overlap_sq is None or self._overlap_sq.device != x.device:
+                radii = torch.tensor([a.shape.radius for a in self.world.agents], device=x.device)
+                collides = torch.tensor([a.collide for a in self.world.agents], device=x.device)
+                eligible = collides.view(-1, 1) & ~torch.eye(n_agents, dtype=torch.bool, device=x.device)
+                # overlap: distance < r_i + r_j, compared squared; pairs that cannot count get a
+                # threshold no squared distance is below
+                self._overlap_sq = torch.where(eligible, (radii.view(-1, 1) + radii.view(1, -1)) ** 2, -1.0).unsqueeze(-1)
+            overlaps = (_squared_gaps(ax, ay, ax, ay) < self._overlap_sq).sum(dim=(0, 1))
             self._reward_cache = -n_agents * coverage - overlaps.float()
         return self._reward_cache
 
@@ -116,9 +114,22 @@ class Scenario(BaseScenario):
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
         relative = pos[rows] - own_pos.unsqueeze(1)  # [A, R, B, 2]
-        observations = torch.cat([own_pos, own_vel, relative.permute(0, 2, 1, 3).flatten(2)], dim=-1)
+        n_agents, n_rows = rows.shape
+        # lay out [A, B, (own pos, own vel, R relative), 2] moving whole (x, y) pairs (see layout.as_pairs)
+        observations = pos.new_empty(n_agents, pos.shape[1], n_rows + 2, 2)
+        pairs = as_pairs(observations)
+        pairs[:, :, 0] = as_pairs(own_pos)
+        pairs[:, :, 1] = as_pairs(own_vel)
+        pairs[:, :, 2:] = as_pairs(relative).transpose(1, 2)
+        observations = observations.flatten(2)
         self._obs_cache = (pos, vel, observations)
         return observations
+
+
+def _squared_gaps(ax: torch.Tensor, ay: torch.Tensor, bx: torch.Tensor, by: torch.Tensor) -> torch.Tensor:
+    """Squared distances ``[I, J, B]`` between points ``(ax, ay)`` ``[I, B]`` and ``(bx, by)`` ``[J, B]``."""
+    dx, dy = ax.unsqueeze(1) - bx.unsqueeze(0), ay.unsqueeze(1) - by.unsqueeze(0)
+    return torch.addcmul(dx * dx, dy, dy)
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):
