@@ -184,8 +184,12 @@ def step_planar(
             _add_pairs(force, jt.index_ab, torch.stack([jfx, jfy, t_a]), torch.stack([-jfx, -jfy, t_b]))
         for pair in tables.pairs:
             if pair.kind == ("sphere", "sphere"):
-                on_a = contacts.sphere_pair_forces(pair, q[:2], params, exact=tables.joints is not None)
-                _add_pairs(force[:2], pair.index_ab, on_a, -on_a)
+                exact = tables.joints is not None
+                on_a = contacts.sphere_pair_forces(pair, q[:2], params, exact=exact)
+                if exact:
+                    _add_pairs(force[:2], pair.index_ab, on_a, -on_a)
+                else:
+                    _add_pairs_opposite(force[:2], pair.index_a, pair.index_b, on_a)
                 continue
             fax, fay, fbx, fby, t_a, t_b = contacts.pair_contact(pair, x, y, rot, params)
             if t_a is None and t_b is None:
@@ -249,6 +253,22 @@ def _add_pairs(force: Tensor, index_ab: Tensor, on_a: Tensor, on_b: Tensor) -> N
         force.transpose(0, 1).index_add_(0, index_ab, values.transpose(0, 1))
     else:
         force.index_add_(1, index_ab, values)
+
+
+def _add_pairs_opposite(force: Tensor, index_a: Tensor, index_b: Tensor, on_a: Tensor) -> None:
+    """Add ``on_a`` ``[C, P, B]`` onto the first members and ``-on_a`` onto the second, in place.
+
+    Two scatters and no ``[C, 2P, B]`` stack or negated copy: all ``a`` terms are
+    summed before the ``b`` terms, an order VMAS does not use, so only for
+    kernels that do not promise bit parity (see :func:`_add_pairs`).
+    """
+    if force.shape[-1] < SCATTER_TRANSPOSE_BELOW:
+        target, values = force.transpose(0, 1), on_a.transpose(0, 1)
+        target.index_add_(0, index_a, values)
+        target.index_add_(0, index_b, values, alpha=-1)
+    else:
+        force.index_add_(1, index_a, on_a)
+        force.index_add_(1, index_b, on_a, alpha=-1)
 
 
 def _friction(v: Tensor, c: dict, sub_dt: float) -> Tensor:

@@ -66,22 +66,33 @@ def ray_sphere_xy(
 ) -> Tensor:
     """:func:`ray_sphere` on separate x/y components (origin, ray direction, centre); all broadcast.
 
-    Laid out for the LIDAR, where the centre offset is per target and env and
-    the direction per ray: the perpendicular offset is one cross product
-    (three ops over all rays instead of seven), and the hit test selects with float 0/1 masks (``torch.where`` is an order of
-    magnitude slower than arithmetic on the CPU). A miss returns exactly
-    ``max_range``; a hit may differ from the textbook formula in the last bits.
+    Laid out for the LIDAR, where the centre offset is per target and env
+    (``[E, B, 1]``) and the direction per ray (``[1, B, R]``), so the fewer
+    passes over ``[E, B, R]`` the better (ten here):
+
+    * ``along``, the signed distance to the foot of the perpendicular, is the
+      only per-ray product;
+    * the squared half chord ``r^2 - across^2`` is ``along^2 - (|c|^2 - r^2)``,
+      whose second term is per target and env;
+    * hit (``half chord^2 > 0`` and ``along > 0``) is one float mask
+      (``torch.where`` is an order of magnitude slower than arithmetic on the CPU).
+
+    A miss returns exactly ``max_range``; a hit may differ from the textbook
+    formula in the last bits. The root's argument is clamped to a tiny
+    positive value, so misses get neither NaN values nor NaN gradients.
     """
     to_cx, to_cy = cx - ox, cy - oy
-    along = torch.addcmul(to_cx * cos_a, to_cy, sin_a)  # signed distance to the foot of the perpendicular
-    across = torch.addcmul(to_cx * sin_a, to_cy, cos_a, value=-1)  # signed distance of the centre from the ray line
-    offset_sq = across * across
-    radius_sq = radius * radius
-    hit = mask_lt(offset_sq, radius_sq) * mask_gt(along, 0.0)
-    # a miss takes the root of 1 (exactly, for finite values): no NaN in the value or its gradient
-    half_chord = torch.sqrt((radius_sq - offset_sq) * hit + (1 - hit))
+    along = torch.addcmul(to_cx * cos_a, to_cy, sin_a)
+    beyond_sq = torch.addcmul(to_cx * to_cx, to_cy, to_cy) - radius * radius  # |c|^2 - r^2, per target and env
+    half_chord_sq = torch.addcmul(-beyond_sq, along, along)
+    hit = mask_gt(torch.minimum(half_chord_sq, along), 0.0)
+    half_chord = half_chord_sq.clamp_min(_TINY).sqrt()
     max_range = _as_tensor(max_range, along)
-    return (along - half_chord - max_range) * hit + max_range
+    return torch.addcmul(max_range, along - half_chord - max_range, hit)
+
+
+#: floor of a square root's argument: far below any real half chord, and its root's gradient stays finite
+_TINY = 1e-30
 
 
 def ray_box(
