@@ -92,7 +92,7 @@ def test_spaces_match_upstream_and_actions_work(mode):
 
 # -------------------------------------------------------------------------- reset
 def scenario_state(env) -> dict:
-    return {"t": env.scenario.t, "shaping": env.scenario.distance_shaping}
+    return {"t": env.scenario.t, "shaping": env.scenario.distance_shaping.T}  # per env: rows
 
 
 @pytest.mark.parametrize("index", [2, [0, 3], "mask"])
@@ -107,7 +107,7 @@ def test_reset_at_resets_exactly_those_envs(index):
     start = torch.tensor([0.0, -1.0]).expand(int(chosen.sum()), 2)
     torch.testing.assert_close(env.world.agents[0].state.pos[chosen], start)
     # the shaping baseline of a reset env is that of its new positions
-    torch.testing.assert_close(scenario.distance_shaping[chosen], scenario._shaping(positions(env))[chosen])
+    torch.testing.assert_close(scenario.distance_shaping[:, chosen], scenario._shaping(scenario._distances())[:, chosen])
 
 
 # ------------------------------------------------------------------------- parity
@@ -115,7 +115,7 @@ def copy_clock_and_shaping(up, ours) -> None:
     """Besides positions, the reward depends on per-env state drawn at reset: the target's clock
     (its heading) and each agent's last shaping value, which upstream computed from its own draw."""
     ours.scenario.t = up.scenario.t.clone()
-    ours.scenario.distance_shaping = torch.stack([a.distance_shaping for a in up.world.policy_agents], dim=1).clone()
+    ours.scenario.distance_shaping = torch.stack([a.distance_shaping for a in up.world.policy_agents]).clone()
 
 
 def test_matches_upstream_vmas():
@@ -174,7 +174,7 @@ def test_reward_terms():
         torch.testing.assert_close(rew, info["agent_collision_rew"] + info["agent_distance_rew"])
     before = env.scenario.distance_shaping.clone()
     _, _, _, infos = env.step([torch.zeros(1, 2)] * 2)
-    torch.testing.assert_close(torch.stack([i["agent_distance_rew"] for i in infos], dim=1),
+    torch.testing.assert_close(torch.stack([i["agent_distance_rew"] for i in infos]),
                                before - env.scenario.distance_shaping)
 
 

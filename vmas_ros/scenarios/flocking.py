@@ -147,15 +147,17 @@ class Scenario(BaseScenario):
             ))
 
         self._index = {agent.name: i for i, agent in enumerate(world.policy_agents)}
-        self._radii = torch.tensor([a.shape.radius for a in world.agents], device=device)
-        self._not_self = ~torch.eye(len(world.agents), dtype=torch.bool, device=device)
+        radii = torch.tensor([a.shape.radius for a in world.agents], device=device)
+        self._radii_i, self._radii_j = radii.view(-1, 1, 1), radii.view(1, -1, 1)  # [A, A, B] broadcasts
+        self._not_self = ~torch.eye(len(world.agents), dtype=torch.bool, device=device).unsqueeze(-1)
         #: per env: rewards computed so far (drives the target's heading) [B]
         self.t = torch.zeros(batch_dim, device=device)
-        #: per env and agent: the shaping value at the last reward [B, n_agents]
-        self.distance_shaping = torch.zeros(batch_dim, self.n_agents, device=device)
-        #: per env and agent: the last reward's two terms [B, n_agents]
-        self.collision_rew = torch.zeros(batch_dim, self.n_agents, device=device)
-        self.dist_rew = torch.zeros(batch_dim, self.n_agents, device=device)
+        #: per agent and env: the shaping value at the last reward [n_agents, B] (agent-major: each
+        #: agent's reward is a contiguous row)
+        self.distance_shaping = torch.zeros(self.n_agents, batch_dim, device=device)
+        #: per agent and env: the last reward's two terms [n_agents, B]
+        self.collision_rew = torch.zeros(self.n_agents, batch_dim, device=device)
+        self.dist_rew = torch.zeros(self.n_agents, batch_dim, device=device)
         return world
 
     def _drive_target(self, target: Agent, world: World) -> None:
@@ -176,33 +178,36 @@ class Scenario(BaseScenario):
         for k, entity in enumerate(placed):
             entity.set_pos(for_setter(positions[:, k], env_index), batch_index=env_index)
 
-        shaping = self._shaping(self._positions())
+        shaping = self._shaping(self._distances())
         if env_index is None:
             self.distance_shaping = shaping
             self.t = torch.zeros_like(self.t)
         else:
-            self.distance_shaping[env_index] = shaping[env_index]
+            self.distance_shaping[:, env_index] = shaping[:, env_index]
             self.t[env_index] = 0.0
 
     # ------------------------------------------------------------------ reward
-    def _positions(self) -> Tensor:
-        """Every agent's position, the target first: [B, 1 + n_agents, 2]."""
-        return torch.stack([a.state.pos for a in self.world.agents], dim=1)
+    def _distances(self) -> Tensor:
+        """Centre distances ``[A, A, B]`` between all agents, the target first (planar rows: vectorises)."""
+        x, y = self.world.stacked_xy("pos")
+        n = len(self.world.agents)  # agents are the last rows of the entity stack
+        x, y = x[-n:], y[-n:]
+        dx, dy = x.unsqueeze(1) - x.unsqueeze(0), y.unsqueeze(1) - y.unsqueeze(0)
+        return torch.addcmul(dx * dx, dy, dy).sqrt_()
 
-    def _shaping(self, pos: Tensor) -> Tensor:
-        """Each policy agent's mean squared deviation from ``DESIRED_DISTANCE`` to the others, [B, n_agents]."""
-        dist = pairwise_distances(pos)[:, 1:]  # rows: policy agents; columns: every agent
-        gap = (dist - DESIRED_DISTANCE).pow(2)
-        return (gap * self._not_self[1:]).sum(dim=-1) / (pos.shape[1] - 1) * self.dist_shaping_factor
+    def _shaping(self, dist: Tensor) -> Tensor:
+        """Each policy agent's mean squared deviation from ``DESIRED_DISTANCE`` to the others, [n_agents, B]."""
+        gap = (dist[1:] - DESIRED_DISTANCE).pow(2)  # rows: policy agents; columns: every agent
+        return (gap * self._not_self[1:]).sum(dim=1) / (dist.shape[0] - 1) * self.dist_shaping_factor
 
     def _update_rewards(self) -> None:
         """All agents' reward terms for this step, in one batched pass (also advances the target's clock)."""
         self.t = self.t + 1
-        pos = self._positions()
-        surface_gap = pairwise_distances(pos) - self._radii.unsqueeze(0) - self._radii.unsqueeze(1)
+        dist = self._distances()
+        surface_gap = dist - self._radii_j - self._radii_i
         touching = (surface_gap <= COLLISION_DISTANCE) & self._not_self
-        self.collision_rew = touching[:, 1:].sum(dim=-1) * self.collision_reward
-        shaping = self._shaping(pos)
+        self.collision_rew = touching[1:].sum(dim=1) * self.collision_reward
+        shaping = self._shaping(dist)
         self.dist_rew = self.distance_shaping - shaping
         self.distance_shaping = shaping
 
@@ -210,7 +215,7 @@ class Scenario(BaseScenario):
         i = self._index[agent.name]
         if i == 0:
             self._update_rewards()
-        return self.collision_rew[:, i] + self.dist_rew[:, i]
+        return self.collision_rew[i] + self.dist_rew[i]
 
     def observation(self, agent: Agent) -> Tensor:
         return torch.cat([
@@ -219,7 +224,7 @@ class Scenario(BaseScenario):
 
     def info(self, agent: Agent) -> dict[str, Tensor]:
         i = self._index[agent.name]
-        return {"agent_collision_rew": self.collision_rew[:, i], "agent_distance_rew": self.dist_rew[:, i]}
+        return {"agent_collision_rew": self.collision_rew[i], "agent_distance_rew": self.dist_rew[i]}
 
 
 def is_not_agent(entity) -> bool:

@@ -80,6 +80,12 @@ def _broadcast_shape(a: Tensor, b) -> Tuple[int, ...]:
     return geo.broadcast_shape(a.shape, b.shape)
 
 
+def rows(t: Tensor, index: Tensor) -> Tensor:
+    """``t[index]`` for a 1-D long ``index``: ``index_select`` runs about 5x faster than advanced
+    indexing on the CPU for [P, B] gathers, with the same values and gradients."""
+    return torch.index_select(t, 0, index)
+
+
 def select(mask: Tensor, a: Tensor, b: Tensor) -> Tensor:
     """``where(mask, a, b)`` for a float 0/1 ``mask`` and finite ``a``, ``b`` (exact)."""
     return a * mask + b * (1 - mask)
@@ -142,7 +148,7 @@ def sphere_pair_forces(pair: PairTable, xy: Tensor, params, exact: bool = False)
     No broad-phase gate: for two spheres the broad phase's reach is the sum of
     the radii, the contact distance itself, so every active contact passes it.
     """
-    d = xy[:, pair.index_a] - xy[:, pair.index_b]
+    d = torch.index_select(xy, 1, pair.index_a) - torch.index_select(xy, 1, pair.index_b)
     p = pair.params
     dist_min = p["a_radius"] + p["b_radius"]
     margin = params.contact_margin
@@ -173,7 +179,7 @@ def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params) -> 
     """Contact forces and torques ``[P, B]`` of one kernel's pairs, from planar state ``[N, B]``."""
     p = pair.params
     ia, ib = pair.index_a, pair.index_b
-    xa, ya, xb, yb = x[ia], y[ia], x[ib], y[ib]
+    xa, ya, xb, yb = rows(x, ia), rows(y, ia), rows(x, ib), rows(y, ib)
     dx, dy = xa - xb, ya - yb
     gap = norm(dx, dy)
     gate = _gate(gap, p["reach"], params.broad_phase)
@@ -189,7 +195,7 @@ def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params) -> 
         # the contact points are the centres: reuse the broad phase's offset and distance
         fx, fy = soft_contact(dx, dy, gap, p["a_radius"] + p["b_radius"], strength, margin, gate=gate)
         return fx, fy, -fx, -fy, None, None
-    ra, rb = rot[ia], rot[ib]
+    ra, rb = rows(rot, ia), rows(rot, ib)
     if kind == ("line", "sphere"):
         qx, qy = geo.closest_point_on_segment_xy(xa, ya, ra, p["a_length"], xb, yb)
         fbx, fby = push(xb, yb, qx, qy, p["b_radius"] + LINE_MIN_DIST)
@@ -250,7 +256,7 @@ def joint_forces(
 ) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
     """Forces ``(fx, fy)`` on the a side (b gets the opposite) and torques on a and b, each ``[J, B]``."""
     ia, ib = joints.index_a, joints.index_b
-    xa, ya, xb, yb, ra, rb = x[ia], y[ia], x[ib], y[ib], rot[ia], rot[ib]
+    xa, ya, xb, yb, ra, rb = rows(x, ia), rows(y, ia), rows(x, ib), rows(y, ib), rows(rot, ia), rows(rot, ib)
     # anchors: body-frame offsets rotated into the world frame
     cos_a, sin_a, cos_b, sin_b = torch.cos(ra), torch.sin(ra), torch.cos(rb), torch.sin(rb)
     ax0, ay0, bx0, by0 = joints.anchor_ax, joints.anchor_ay, joints.anchor_bx, joints.anchor_by

