@@ -2,10 +2,11 @@
 
 ``physics.step_planar`` integrates free entities and leaves held ones (not
 movable / not rotatable) untouched in one of three ways, picked by batch size
-and layout: ``torch.where`` with bool masks (small batches), 0/1 float masks
-(large batches), or, when the held entities form one block at an end of the
-entity list (landmarks before agents), integrating only the free block and
-concatenating the held rows back. These tests run the same large-batch worlds
+and layout: ``torch.where`` with bool masks (small batches), copying the held
+(coordinate, entity) rows back with ``index_copy`` (large batches), or,
+when the held entities form one block at an end of the entity list (landmarks
+before agents), integrating only the free block and concatenating the held
+rows back. These tests run the same large-batch worlds
 through each path and require equal bits, and check the block detection.
 """
 from __future__ import annotations
@@ -66,7 +67,7 @@ def _paths(world: World, monkeypatch):
     runs = {"default": _run(world, 1)}
     with monkeypatch.context() as m:
         m.setitem(c, "free_span", None)
-        runs["float_masks"] = _run(world, 1)
+        runs["held_rows"] = _run(world, 1)
         m.setattr(physics, "SMALL_BATCH_ELEMENTS", 10 ** 12)
         runs["where"] = _run(world, 1)
     return c, runs
@@ -78,6 +79,7 @@ def test_every_path_gives_the_same_bits(layout, device, monkeypatch):
     c, runs = _paths(world, monkeypatch)
     has_block = layout in ("landmarks_first", "held_last", "walls", "substeps")
     assert (c["free_span"] is not None) == has_block
+    assert len(c["held_rows"]) == int((~c["free_bool"]).sum())  # held (coordinate, entity) rows, any layout
     for name, run in runs.items():
         for step, (ours, ref) in enumerate(zip(run, runs["where"])):
             assert torch.equal(ours.q, ref.q) and torch.equal(ours.v, ref.v), f"{layout}: {name} differs at step {step}"

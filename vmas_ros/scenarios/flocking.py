@@ -85,25 +85,25 @@ def sample_clear_positions(
     arena), that row takes its candidate farthest from the others.
     """
     rows, device = occupied.shape[0], occupied.device
-    row = torch.arange(rows, device=device)
-    # planar x/y components: a broadcast over a trailing dim of 2 is a slow path on the CPU
-    taken_x, taken_y = occupied[..., 0], occupied[..., 1]
+    # entity-major planar components [m, rows, 1]: the distances to everything placed are [m, rows,
+    # candidates] with the candidates contiguous, and the nearest is a reduction over the leading dim
+    # (a reduction over a small trailing dim, or a broadcast over a trailing dim of 2, is a slow path)
+    taken_x, taken_y = occupied[..., 0].T.unsqueeze(-1), occupied[..., 1].T.unsqueeze(-1)
     picked = []
     for _ in range(count):
         draw_x = torch.empty(rows, candidates, device=device).uniform_(*x_bounds)
         draw_y = torch.empty(rows, candidates, device=device).uniform_(*y_bounds)
-        if taken_x.shape[1]:
-            gap_x = draw_x.unsqueeze(2) - taken_x.unsqueeze(1)
-            gap_y = draw_y.unsqueeze(2) - taken_y.unsqueeze(1)
-            clearance = (gap_x * gap_x + gap_y * gap_y).amin(dim=2)  # squared distances
+        if taken_x.shape[0]:
+            gap_x, gap_y = draw_x - taken_x, draw_y - taken_y
+            clearance = torch.addcmul(gap_x * gap_x, gap_y, gap_y).amin(dim=0)  # squared distances
         else:
             clearance = torch.full((rows, candidates), math.inf, device=device)
         clear = clearance >= min_dist * min_dist
-        pick = torch.where(clear.any(dim=1), clear.int().argmax(dim=1), clearance.argmax(dim=1))
-        x, y = draw_x[row, pick], draw_y[row, pick]
-        picked.append(torch.stack([x, y], dim=-1))
-        taken_x = torch.cat([taken_x, x.unsqueeze(1)], dim=1)
-        taken_y = torch.cat([taken_y, y.unsqueeze(1)], dim=1)
+        pick = torch.where(clear.any(dim=1), clear.int().argmax(dim=1), clearance.argmax(dim=1)).unsqueeze(1)
+        x, y = torch.gather(draw_x, 1, pick), torch.gather(draw_y, 1, pick)  # [rows, 1]
+        picked.append(torch.cat([x, y], dim=1))
+        taken_x = torch.cat([taken_x, x.unsqueeze(0)])
+        taken_y = torch.cat([taken_y, y.unsqueeze(0)])
     return torch.stack(picked, dim=1) if picked else occupied.new_zeros(rows, 0, 2)
 
 

@@ -49,8 +49,8 @@ cross = TorchUtils.cross
 #: measured crossover on the CPU: ~16 envs
 SCATTER_TRANSPOSE_BELOW = 16
 
-#: up to this many entity-env rows the step selects with ``torch.where`` (one call, per-call cost
-#: dominates); above, with float 0/1 masks (three calls, but ~25x cheaper per element on the CPU)
+#: up to this many state elements the step keeps held entities still with one ``torch.where`` (per-call
+#: cost dominates); above, by copying their rows back (``torch.where`` is slow per element on the CPU)
 SMALL_BATCH_ELEMENTS = 8192
 
 
@@ -215,8 +215,10 @@ def step_planar(
             free = c["free_bool"]
             q, v = torch.where(free, new_q, q), torch.where(free, new_v, v0)
         else:
-            free, held = c["free"], c["held"]
-            q, v = new_q * free + q * held, new_v * free + v0 * held
+            # copy the held (coordinate, entity) rows back: one pass, where 0/1 float masks took six
+            held, shape = c["held_rows"], new_q.shape
+            q = new_q.flatten(0, 1).index_copy(0, held, q.flatten(0, 1).index_select(0, held)).view(shape)
+            v = new_v.flatten(0, 1).index_copy(0, held, v0.flatten(0, 1).index_select(0, held)).view(shape)
     return PlanarState(q, v)
 
 
@@ -284,9 +286,10 @@ def step_constants(tables: WorldTables, params: StepParams) -> dict:
     """Per-coordinate constants of :func:`step_planar` as ``[3, N, 1]`` columns, computed once per tables.
 
     Rows are (x, y, angle): mass for the first two, moment of inertia for the
-    angle. Masks are float 0/1 for large batches (``a * 1 + b * 0`` is exactly
-    ``a`` for finite values, and multiplying is much cheaper than
-    ``torch.where`` on the CPU) and bool for small ones (one call instead of three).
+    angle. Held entities are kept still with a bool mask for small batches
+    (one ``torch.where`` call) and, for large ones, by copying their rows
+    back (``held_rows``) or integrating only the free block (``free_span``):
+    ``torch.where`` is much slower per element than a copy on the CPU.
     """
     sub_dt = params.dt / params.substeps
     key = (sub_dt, params.x_semidim, params.y_semidim)
@@ -298,7 +301,6 @@ def step_constants(tables: WorldTables, params: StepParams) -> dict:
     mass, inertia = col(tables.mass), col(tables.inertia)
     movable, rotatable = col(tables.movable), col(tables.rotatable)
     free_bool = per_coord(movable, rotatable)
-    free = free_bool.to(mass.dtype)
     max_speed = col(tables.max_speed)
     v_range = col(tables.v_range)
     inf = float("inf")
@@ -314,12 +316,14 @@ def step_constants(tables: WorldTables, params: StepParams) -> dict:
                               torch.zeros_like(tables.gravity_force[..., 0]).unsqueeze(0)]),
         "max_speed": max_speed, "finite_max_speed": torch.where(torch.isfinite(max_speed), max_speed, 0.0),
         "v_range": torch.stack([v_range, v_range, no_limit]),
-        "free_bool": free_bool, "free": free, "held": 1 - free, "all_free": bool(free_bool.all()),
+        "free_bool": free_bool, "all_free": bool(free_bool.all()),
         "semidims": (None if params.x_semidim is None and params.y_semidim is None
                      else torch.tensor(bounds, dtype=mass.dtype, device=mass.device).reshape(3, 1, 1)),
         "limits_speed": tables.limits_speed, "limits_velocity": tables.limits_velocity,
     }
     cached["free_span"] = span = _free_span(free_bool)
+    #: held rows of the flattened [3 * N, B] state (coordinate-major), for the index_copy path
+    cached["held_rows"] = (~free_bool[..., 0]).flatten().nonzero()[:, 0]
     cached["free_block"] = None if span is None else _block_constants(cached, *span)
     tables._planar_cache = cached
     return cached
