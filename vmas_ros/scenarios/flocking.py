@@ -193,7 +193,8 @@ class Scenario(BaseScenario):
         n = len(self.world.agents)  # agents are the last rows of the entity stack
         x, y = x[-n:], y[-n:]
         dx, dy = x.unsqueeze(1) - x.unsqueeze(0), y.unsqueeze(1) - y.unsqueeze(0)
-        return torch.addcmul(dx * dx, dy, dy).sqrt_()
+        # the floor keeps the root's gradient finite on the diagonal (an agent to itself), as a norm's is
+        return torch.addcmul(dx * dx, dy, dy).clamp_min(1e-30).sqrt()
 
     def _shaping(self, dist: Tensor) -> Tensor:
         """Each policy agent's mean squared deviation from ``DESIRED_DISTANCE`` to the others, [n_agents, B]."""

@@ -28,9 +28,16 @@ from torch import Tensor
 _LITTLE_ENDIAN = sys.byteorder == "little"
 
 
+def _bit_trick(vectors: Tensor) -> bool:
+    """Whether the integer view may be used: float32, little-endian, contiguous, and no gradient to keep
+    (integer views cut the autograd graph; differentiable envs take the plain, slower copy)."""
+    return (vectors.dtype == torch.float32 and _LITTLE_ENDIAN and vectors.is_contiguous()
+            and not (vectors.requires_grad and torch.is_grad_enabled()))
+
+
 def split_xy(vectors: Tensor) -> Tuple[Tensor, Tensor]:
     """``[..., 2]`` -> contiguous ``x``, ``y`` of shape ``[...]`` (bit-exact copies)."""
-    if vectors.dtype == torch.float32 and _LITTLE_ENDIAN and vectors.is_contiguous():
+    if _bit_trick(vectors):
         pairs = vectors.view(torch.int64).squeeze(-1)  # one (x, y) pair per int64
         x = pairs.to(torch.int32).view(torch.float32)  # low 32 bits
         y = (pairs >> 32).to(torch.int32).view(torch.float32)  # high 32 bits
@@ -41,7 +48,7 @@ def split_xy(vectors: Tensor) -> Tuple[Tensor, Tensor]:
 
 def split_xy_stacked(vectors: Tensor) -> Tensor:
     """``[..., 2]`` -> contiguous ``[2, ...]`` (``x`` then ``y``; bit-exact copies)."""
-    if vectors.dtype == torch.float32 and _LITTLE_ENDIAN and vectors.is_contiguous():
+    if _bit_trick(vectors):
         pairs = vectors.view(torch.int64).squeeze(-1)
         return torch.stack([pairs, pairs >> 32]).to(torch.int32).view(torch.float32)
     return torch.stack(vectors.unbind(-1))

@@ -226,7 +226,9 @@ def _integrate(q: Tensor, v: Tensor, force: Tensor, c: dict, first_substep: bool
     """One semi-implicit Euler substep of the rows in ``q``/``v`` (``c``: their constants), limits applied."""
     if first_substep:
         v = v * c["keep"]
-    new_v = v + force / c["mass"] * c["sub_dt"]  # VMAS's rounding
+    # v + force / mass * dt in VMAS's rounding (addition commutes exactly), in one fresh tensor:
+    # the in-place steps only touch the quotient, whose gradient needs neither it nor its inputs
+    new_v = (force / c["mass"]).mul_(c["sub_dt"]).add_(v)
     if c["limits_speed"]:
         speed = contacts.norm(new_v[0], new_v[1])
         over = contacts.mask_gt(speed, c["max_speed"])
@@ -235,7 +237,7 @@ def _integrate(q: Tensor, v: Tensor, force: Tensor, c: dict, first_substep: bool
         new_v = torch.cat([contacts.select(over, limited, new_v[:2]), new_v[2:]])
     if c["limits_velocity"]:
         new_v = torch.clamp(new_v, -c["v_range"], c["v_range"])
-    new_q = q + new_v * c["sub_dt"]
+    new_q = (new_v * c["sub_dt"]).add_(q)
     if c["semidims"] is not None:
         new_q = torch.clamp(new_q, -c["semidims"], c["semidims"])
     return new_q, new_v

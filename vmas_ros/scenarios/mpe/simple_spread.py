@@ -76,7 +76,8 @@ class Scenario(BaseScenario):
             ax, ay, lx, ly = x[n_landmarks:], y[n_landmarks:], x[:n_landmarks], y[:n_landmarks]
             # each landmark's distance to its nearest agent, summed over landmarks: [A, L, B] -> [B]
             # (sqrt is monotonic, so the nearest agent is found on squared distances)
-            coverage = torch.sqrt(_squared_gaps(ax, ay, lx, ly).amin(dim=0)).sum(dim=0)
+            # (the floor keeps the root's gradient finite when an agent sits exactly on a landmark)
+            coverage = _squared_gaps(ax, ay, lx, ly).amin(dim=0).clamp_min(1e-30).sqrt().sum(dim=0)
             if self._overlap_sq is None or self._overlap_sq.device != x.device:
                 radii = torch.tensor([a.shape.radius for a in self.world.agents], device=x.device)
                 collides = torch.tensor([a.collide for a in self.world.agents], device=x.device)
@@ -114,7 +115,7 @@ class Scenario(BaseScenario):
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
         # index_select of the flat rows: ~5x faster than advanced indexing on the CPU
-        relative = torch.index_select(pos, 0, rows.flatten()).view(*rows.shape, *pos.shape[1:]) - own_pos.unsqueeze(1)
+        relative = torch.index_select(pos, 0, rows.flatten()).view(*rows.shape, *pos.shape[1:]).sub_(own_pos.unsqueeze(1))
         n_agents, n_rows = rows.shape
         # lay out [A, B, (own pos, own vel, R relative), 2] moving whole (x, y) pairs (see layout.as_pairs)
         observations = pos.new_empty(n_agents, pos.shape[1], n_rows + 2, 2)
