@@ -287,3 +287,25 @@ def test_oracle_inner_point(device, gen):
     ref_inner, ref_depth = _get_inner_point_box(outside, surface, center)
     close(inner, ref_inner)
     close(depth, ref_depth)
+
+
+def test_box_frame_closest_point_agrees_with_the_side_search(device):
+    """The box-frame kernel of the contact step finds the search's point (inside, outside, corners)."""
+    gen = torch.Generator().manual_seed(3)
+    n = 20000
+    cx, cy = (torch.rand(2, 1, n, generator=gen) - 0.5).to(device)
+    rot = ((torch.rand(1, n, generator=gen) - 0.5) * 7).to(device)
+    px, py = cx + (torch.rand(1, n, generator=gen) * 0.8 - 0.4).to(device), cy + (torch.rand(1, n, generator=gen) * 0.8 - 0.4).to(device)
+    length, width = torch.tensor([[0.3]], device=device), torch.tensor([[0.15]], device=device)
+    sx, sy = g.closest_point_on_box_boundary_xy(cx, cy, rot, length, width, px, py)
+    fx, fy = g.closest_point_on_box_boundary_in_frame(cx, cy, rot, length, width, px, py)
+    gap = torch.maximum((sx - fx).abs(), (sy - fy).abs())
+    # equal to rounding, except where the search meets a float tie between two sides: then both points
+    # are (to float precision) equally far: an offset e along the side changes the distance d by
+    # e^2 / 2d, which float32 misses while e < sqrt(2 d ulp(d)), about 2e-4 sqrt(d)
+    dist = torch.hypot(px - sx, py - sy)
+    assert (gap <= 1e-6).float().mean() > 0.999
+    assert (gap <= 2e-4 * dist.sqrt() + 1e-6).all()
+    torch.testing.assert_close(torch.hypot(px - fx, py - fy), dist, atol=2e-6, rtol=0)
+    inside = ((px - cx) * torch.cos(rot) + (py - cy) * torch.sin(rot)).abs() < 0.15
+    assert inside.any() and (~inside).any()

@@ -86,8 +86,12 @@ def test_world_forces_match_upstream(world_kwargs):
     )
     _randomize(up, ours, seed=11)
     # friction (stick-slip) and a 4x stiffer contact amplify the last bit of a sphere-sphere length
-    # (see parity.run_lockstep): compared step by step
-    chaotic = "linear_friction" in world_kwargs or world_kwargs.get("collision_force", 0) > 100
+    # (see parity.run_lockstep): compared step by step. So does the crowded walled arena: box-sphere
+    # contacts are found in the box frame, and where VMAS's side-by-side search meets a float tie
+    # between two sides its rounding picks a point up to ~2e-4 sqrt(distance) away (one-step
+    # differences up to 4e-5 here, grown past 1e-4 by step 5 when run free)
+    chaotic = ("linear_friction" in world_kwargs or world_kwargs.get("collision_force", 0) > 100
+               or "x_semidim" in world_kwargs)
     _run(up, ours, seed=12, resync=chaotic)
 
 

@@ -44,6 +44,11 @@ def norm(x: Tensor, y: Tensor) -> Tensor:
     return torch.linalg.vector_norm(torch.stack([x, y], dim=-1), dim=-1)
 
 
+def _hypot(x: Tensor, y: Tensor) -> Tensor:
+    """``sqrt(x * x + y * y)``: the fast length (see :func:`norm` for the VMAS-rounded one)."""
+    return torch.addcmul(x * x, y, y).sqrt_()
+
+
 def mask_ge(a: Tensor, b) -> Tensor:
     """``a >= b`` as float 0/1 (broadcast), without a bool intermediate."""
     return torch.ge(a, b, out=a.new_empty(_broadcast_shape(a, b)))
@@ -175,13 +180,24 @@ def _zero(like: Tensor) -> Tensor:
 _ZEROS: dict = {}
 
 
-def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params) -> PairForces:
-    """Contact forces and torques ``[P, B]`` of one kernel's pairs, from planar state ``[N, B]``."""
+def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params, exact: bool = True) -> PairForces:
+    """Contact forces and torques ``[P, B]`` of one kernel's pairs, from planar state ``[N, B]``.
+
+    ``exact``: VMAS's float arithmetic and rounding throughout (worlds with
+    joints, where a last-bit difference grows). Otherwise box-sphere contacts
+    are found in the box frame
+    (:func:`~vmas_ros.simulator.geometry.closest_point_on_box_boundary_in_frame`)
+    with lengths ``sqrt(x * x + y * y)``: the same forces to float rounding, in
+    far fewer passes.
+    """
     p = pair.params
     ia, ib = pair.index_a, pair.index_b
     xa, ya, xb, yb = rows(x, ia), rows(y, ia), rows(x, ib), rows(y, ib)
     dx, dy = xa - xb, ya - yb
-    gap = norm(dx, dy)
+    # the fast length only where the kernel is rewritten anyway: the candidate searches of lines and
+    # box-box pick among near-equal distances, so their rounding stays VMAS's
+    length = _hypot if not exact and pair.kind == ("box", "sphere") else norm
+    gap = length(dx, dy)
     gate = _gate(gap, p["reach"], params.broad_phase)
     strength, margin = params.collision_force, params.contact_margin
     kind = pair.kind
@@ -189,7 +205,7 @@ def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params) -> 
     def push(ax, ay, bx, by, dist_min):
         """Force on the first point from the second one (both given as points)."""
         ddx, ddy = ax - bx, ay - by
-        return soft_contact(ddx, ddy, norm(ddx, ddy), dist_min, strength, margin, gate=gate)
+        return soft_contact(ddx, ddy, length(ddx, ddy), dist_min, strength, margin, gate=gate)
 
     if kind == ("sphere", "sphere"):
         # the contact points are the centres: reuse the broad phase's offset and distance
@@ -201,7 +217,8 @@ def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params) -> 
         fbx, fby = push(xb, yb, qx, qy, p["b_radius"] + LINE_MIN_DIST)
         return -fbx, -fby, fbx, fby, cross(qx - xa, qy - ya, -fbx, -fby), None
     if kind == ("box", "sphere"):
-        sx, sy = geo.closest_point_on_box_boundary_xy(xa, ya, ra, p["a_length"], p["a_width"], xb, yb)
+        closest = geo.closest_point_on_box_boundary_xy if exact else geo.closest_point_on_box_boundary_in_frame
+        sx, sy = closest(xa, ya, ra, p["a_length"], p["a_width"], xb, yb)
         ax, ay, depth = _solid_inner(xb, yb, sx, sy, xa, ya, p["a_solid"])
         fbx, fby = push(xb, yb, ax, ay, p["b_radius"] + LINE_MIN_DIST + depth)
         return -fbx, -fby, fbx, fby, cross(sx - xa, sy - ya, -fbx, -fby), None

@@ -255,6 +255,35 @@ def closest_point_on_box_boundary_xy(
     return _box_boundary_running(cx, cy, rot, length, width, px, py)
 
 
+
+def closest_point_on_box_boundary_in_frame(
+    cx: Tensor, cy: Tensor, rot: Tensor, length: Tensor, width: Tensor, px: Tensor, py: Tensor
+) -> Tuple[Tensor, Tensor]:
+    """The closest point of a box's boundary to ``(px, py)``, found in the box frame.
+
+    The same point as :func:`closest_point_on_box_boundary_xy`'s side-by-side
+    search, in about a third of the passes: express the point in the box
+    frame, clamp it to the half extents (an outside point's closest boundary
+    point), move an inside point onto the nearer side (the length-axis ends win
+    ties, as the first sides do in the search), and rotate back. Agrees with the
+    search to float rounding, not bit for bit, so the step uses it only where
+    VMAS parity is not promised bit for bit (worlds without joints).
+    ``length``/``width`` broadcast against the points (``[P, 1]`` columns).
+    """
+    cos_r, sin_r = torch.cos(rot), torch.sin(rot)
+    rx, ry = px - cx, py - cy
+    lx = torch.addcmul(rx * cos_r, ry, sin_r)  # along the length axis
+    ly = torch.addcmul(ry * cos_r, rx, sin_r, value=-1)  # along the width axis
+    half_l, half_w = length / 2, width / 2
+    qx, qy = torch.minimum(torch.maximum(lx, -half_l), half_l), torch.minimum(torch.maximum(ly, -half_w), half_w)
+    room_x, room_y = half_l - lx.abs(), half_w - ly.abs()  # both >= 0: inside (clamping changed nothing)
+    inside = torch.ge(torch.minimum(room_x, room_y), 0, out=room_x.new_empty(room_x.shape))
+    to_end = inside * torch.le(room_x, room_y, out=room_x.new_empty(room_x.shape))  # onto x = +-half_l
+    to_side = inside - to_end  # onto y = +-half_w
+    qx = torch.addcmul(qx, to_end, torch.copysign(half_l, lx) - qx)
+    qy = torch.addcmul(qy, to_side, torch.copysign(half_w, ly) - qy)
+    return cx + (qx * cos_r - qy * sin_r), cy + (qx * sin_r + qy * cos_r)
+
 #: up to this many points closest_point_on_box_boundary_xy stacks the four sides (measured crossover)
 _STACKED_SIDES_MAX_ELEMENTS = 256
 

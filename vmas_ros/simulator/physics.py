@@ -191,7 +191,7 @@ def step_planar(
                 else:
                     _add_pairs_opposite(force[:2], pair.index_a, pair.index_b, on_a)
                 continue
-            fax, fay, fbx, fby, t_a, t_b = contacts.pair_contact(pair, x, y, rot, params)
+            fax, fay, fbx, fby, t_a, t_b = contacts.pair_contact(pair, x, y, rot, params, exact=tables.joints is not None)
             if t_a is None and t_b is None:
                 _add_pairs(force[:2], pair.index_ab, torch.stack([fax, fay]), torch.stack([fbx, fby]))
             else:
