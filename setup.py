@@ -57,8 +57,9 @@ setup(
     entry_points={
         "console_scripts": [
             "vmas-ros = vmas_ros.cli:main",
-            "sim_node = vmas_ros.ros.sim_node:main",
-            "policy_node = vmas_ros.ros.policy_node:main",
+            # startup.py installs the signal handlers, then imports the node (torch, rclpy)
+            "sim_node = vmas_ros.ros.startup:sim_node_main",
+            "policy_node = vmas_ros.ros.startup:policy_node_main",
         ],
     },
     zip_safe=False,

@@ -177,6 +177,29 @@ def test_installed_executable_runs(colcon_install):
         assert proc.returncode == 0, f"{exe} --help failed\n{proc.stdout}\n{proc.stderr}"
 
 
+@pytest.mark.parametrize("exe", ["sim_node", "policy_node"])
+def test_installed_node_stops_cleanly_on_a_signal_during_its_imports(colcon_install, exe):
+    """What `ros2 run vmas_ros sim_node` starts, stopped 0.3 s in (still importing torch): exit 0, one
+    line, no traceback (vmas_ros/ros/startup.py; test/ros/test_faults_early_signals.py has the rest)."""
+    import signal
+    import time
+
+    site = next(colcon_install.glob("lib/python3*/site-packages"))
+    env = dict(os.environ, PYTHONPATH=str(site), AMENT_PREFIX_PATH=str(colcon_install))
+    proc = subprocess.Popen([str(colcon_install / "lib" / PKG / exe), "--ros-args", "-r", "__ns:=/installed_early"],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert err.strip() == f"{exe}: stopped by SIGINT during start-up, before the node existed (nothing was recorded)"
+
+
 def test_launch_file_defines_a_launch_description():
     """`launch` has no PyPI wheel here, so check the file's shape: it must parse and define
     generate_launch_description() that starts vmas_ros's sim_node with the two arguments."""

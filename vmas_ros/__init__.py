@@ -1,6 +1,14 @@
-"""vmas_ros: a vectorized 2D multi-robot simulator in PyTorch, compatible with VMAS 1.5, for ROS 2."""
-from vmas_ros.envs.make_env import make_env
-from vmas_ros.scenarios import list_scenarios
+"""vmas_ros: a vectorized 2D multi-robot simulator in PyTorch, compatible with VMAS 1.5, for ROS 2.
+
+``import vmas_ros`` stays light (the scenario registry only): ``make_env`` and
+the engine, which pull in torch, load on first use. A node's entry point
+(``python -m vmas_ros.ros.sim_node``) imports this package before anything
+else, and must be able to install its signal handlers before torch's second of
+imports (see vmas_ros/ros/startup.py).
+"""
+import importlib
+
+from vmas_ros.scenarios import list_scenarios  # the registry: no scenario module is imported
 
 __version__ = "0.1.0"
 
@@ -8,13 +16,23 @@ __version__ = "0.1.0"
 scenarios = list_scenarios()
 mpe_scenarios = [name for name in scenarios if name.startswith("simple")]
 
+#: subpackages reachable as attributes (``vmas_ros.envs.wrap``) without importing them first
+_SUBPACKAGES = ("bench", "envs", "policy", "record", "ros", "simulator", "train", "viz")
+
 
 def __getattr__(name: str):
-    # imported on first use: the viewer pulls in Pillow, which a headless training run never needs
+    # imported on first use: torch for make_env; Pillow for the viewer, which a headless run never needs
+    if name == "make_env":
+        from vmas_ros.envs.make_env import make_env
+
+        globals()["make_env"] = make_env
+        return make_env
     if name == "render_interactively":
         from vmas_ros.viz.interactive import render_interactively
 
         return render_interactively
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f"vmas_ros.{name}")
     raise AttributeError(f"module 'vmas_ros' has no attribute {name!r}")
 
 

@@ -162,6 +162,24 @@ def sweep(directory: Path, killed: Iterable[str] = (), min_files: int = 1) -> Di
     return verdicts
 
 
+def catches_sigterm(pid: int) -> bool:
+    """Whether process ``pid`` has a handler for SIGTERM (Linux: the SigCgt mask in /proc/<pid>/status).
+
+    Python itself catches only SIGINT; a node's entry point installs its SIGTERM (and SIGINT) handler
+    first thing (vmas_ros/ros/startup.py). Until then the interpreter is still starting, which no
+    program can guard: tests that signal a node "during its imports" wait for this too."""
+    import signal
+
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith("SigCgt:"):
+                    return bool(int(line.split()[1], 16) >> (signal.SIGTERM - 1) & 1)
+    except (FileNotFoundError, ProcessLookupError):
+        pass
+    return False
+
+
 def last_clock_ns(messages: list) -> Optional[int]:
     """Sim time of the newest rosgraph_msgs/Clock in ``messages`` (None if empty)."""
     if not messages:

@@ -1,12 +1,13 @@
 """Bad input to real sim_node and policy_node processes: refused with the reason, nothing changes.
 
-Covers what test_sim_node.py, test_policy_sim_node.py and test_policy_node.py
+Covers what test_sim_node*.py, test_policy_sim_node.py and test_policy_node.py
 do not: huge (finite) Twist components, per-agent warnings that name the
 value, Foxglove twists with huge values, publishers on topics of agents that
-do not exist or with the wrong message type, runtime parameter changes that
-are ill-typed, out of range or read-only (paths included), and start-up
-refusals for wrong types, ranges, typos, nested keys, corrupt or missing
-parameter files and corrupt policy files.
+do not exist or with the wrong message type (sim_node's commands, policy_node's
+observations), runtime parameter changes that are ill-typed, out of range or
+read-only (paths included), and start-up refusals for wrong types, ranges,
+typos, nested keys, corrupt or missing parameter files, corrupt policy files
+and worlds too large to build.
 """
 from __future__ import annotations
 
@@ -245,6 +246,7 @@ def refused(sim_process, sim_log_dir, bad_files):
     processes = {
         "values": ParamsFileProcess(None, values, sim_log_dir, "params_values"),
         "corrupt policy": sim_process(policy_path=str(f["corrupt_policy"])),
+        "huge world": sim_process(scenario_kwargs={"n_agents": 1_000_000_000}),  # refused before it is built
         "corrupt_yaml": ParamsFileProcess(None, {"__file": str(f["corrupt_yaml"])}, sim_log_dir, "params_corrupt"),
         "missing_yaml": ParamsFileProcess(None, {"__file": str(f["dir"] / "missing.yaml")}, sim_log_dir,
                                           "params_missing"),
@@ -270,6 +272,8 @@ START_CASES = {
                "unknown parameter 'num_env' (did you mean 'num_envs'?)",
                "num_envs must be a single value, got a nested key 'num_envs.a'"],
     "corrupt policy": ["refused parameters: policy_path: cannot load policy", "not valid JSON"],
+    "huge world": ["sim_node: refused parameters: cannot build scenario 'simple_spread': scenario kwarg "
+                   "n_agents=1,000,000,000 is over the limit of 10,000; set VMAS_ROS_ALLOW_LARGE_WORLDS=1"],
     "corrupt_yaml": ["sim_node: refused arguments:", "Couldn't parse params file", "corrupt.yaml"],
     "missing_yaml": ["sim_node: refused arguments:", "missing.yaml"],
     "policy_node values": ["policy_node: refused parameters:", "unknown parameter 'outptu' (did you mean 'output'?)",
@@ -299,3 +303,23 @@ def test_policy_node_refuses_bad_runtime_parameters(ros, sim_log_dir, bad_files)
         assert ros.get_parameters("/policy_node", "rate_hz", "cmd_vel_scale", "output") == [10.0, 1.0, "action"]
         assert "refused parameter change: rate_hz must be in [0.001, 1000], got 1e-12" in node.output()
         assert node.alive()
+
+
+def test_policy_node_names_publishers_of_the_wrong_type_on_its_inputs(ros, sim_log_dir, bad_files):
+    """ROS never delivers a Twist to policy_node's Float32MultiArray observation subscription: say so, once."""
+    wrong = ros.node.create_publisher(Twist, "/agent_1/observation", 10)
+    right = ros.node.create_publisher(Float32MultiArray, "/agent_0/observation", 10)
+    try:
+        with PolicyProcess(ros, {"policy_path": str(bad_files["good_policy"])}, sim_log_dir, "policy_audit") as node:
+            node.wait_publishing(["/agent_0/action"])
+            warning = ("ignoring a publisher of geometry_msgs/msg/Twist on /agent_1/observation: expected "
+                       "std_msgs/msg/Float32MultiArray; policy_node never receives its messages")
+            ros.spin_until(lambda: warning in node.output(), 10, "the wrong-type warning")
+            ros.spin_for(4.5)  # two more audits: still one warning
+            text = node.output()
+            assert text.count("ignoring a publisher") == 1, text
+            assert "on /agent_0/observation" not in text, "a publisher of the right type is not reported"
+            assert node.alive()
+    finally:
+        ros.node.destroy_publisher(wrong)
+        ros.node.destroy_publisher(right)

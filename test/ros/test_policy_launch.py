@@ -64,4 +64,4 @@ def test_launch_file_passes_only_known_parameters():
 
 def test_policy_node_console_script_is_declared():
     source = (ROOT / "setup.py").read_text()
-    assert '"policy_node = vmas_ros.ros.policy_node:main",' in source
+    assert '"policy_node = vmas_ros.ros.startup:policy_node_main",' in source

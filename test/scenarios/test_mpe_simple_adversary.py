@@ -43,9 +43,11 @@ def test_kwargs_and_validation():
     assert len(env.world.landmarks) == 4
     with pytest.warns(UserWarning, match="bogus"):
         _make(bogus=1)
-    for bad in ({"n_agents": 2, "n_adversaries": 2}, {"n_adversaries": 0}, {"n_agents": 2.5}):
+    for bad in ({"n_agents": 2, "n_adversaries": 2}, {"n_adversaries": 0}):
         with pytest.raises(ValueError, match="n_adversaries"):
             _make(**bad)
+    with pytest.raises(ValueError, match="n_agents .*2.5"):  # every count kwarg is checked before the scenario
+        _make(n_agents=2.5)
 
 
 # ------------------------------------------------------------------------ spaces

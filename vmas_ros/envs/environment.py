@@ -18,6 +18,7 @@ from gymnasium import spaces
 from torch import Tensor
 
 from vmas_ros.envs import actions as act
+from vmas_ros.envs.limits import check_world_size
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
 
@@ -54,6 +55,7 @@ class Environment:
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
+        kwargs.update(check_world_size(num_envs, kwargs))  # before make_world allocates anything (envs/limits.py)
         if max_steps is not None and (not isinstance(max_steps, int) or max_steps < 1):
             raise ValueError(f"max_steps must be None or a positive int, got {max_steps!r}")
         if multidiscrete_actions and continuous_actions:

@@ -65,6 +65,21 @@ def split_path(path: Union[str, os.PathLike], index: int) -> Path:
     return path.with_name(f"{stem}_{index}.mcap")
 
 
+def _describe(path: Path) -> str:
+    """What sits at ``path``, for errors: a symlink and its target, a directory or a file."""
+    if path.is_symlink():
+        return f"a symlink to {os.readlink(path)!r}"
+    return "a directory" if path.is_dir() else "a file"
+
+
+def refuse_symlink(path: Path) -> None:
+    """Raise FileExistsError if ``path`` is a symlink, dangling or not: writing through it would
+    put the recording wherever it points (the user named ``path``, not its target)."""
+    if path.is_symlink():
+        raise FileExistsError(f"{path} is {_describe(path)}; the recorder does not write through symlinks, "
+                              "give the real path")
+
+
 def _stale_split_files(path: Path) -> List[Path]:
     stem = path.name[: -len(".mcap")] if path.name.endswith(".mcap") else path.name
     pattern = re.compile(re.escape(stem) + r"_\d+\.mcap$")
@@ -135,7 +150,14 @@ class _UnbufferedFile:
     here. Not a RawIOBase on purpose: Writer would wrap that in a BufferedWriter."""
 
     def __init__(self, path: Path) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        # a new file only: O_EXCL refuses anything already there, and with O_CREAT a symlink
+        # too, dangling or not (it would put the bag wherever it points)
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+        try:
+            self._fd = os.open(path, flags, 0o644)
+        except FileExistsError:
+            raise FileExistsError(f"{path} appeared while recording ({_describe(path)}); "
+                                  "the recorder writes only files it creates") from None
         self._pos = 0
 
     def write(self, data) -> int:

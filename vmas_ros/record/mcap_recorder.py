@@ -37,9 +37,12 @@ Signals
     are swapped for one that only notes the signal, because a signal the kernel
     delivers to another thread (torch's, rclpy's) still makes the main thread
     run its Python handler at the next bytecode. The noted signals go to the
-    original handlers as soon as the write is complete. That costs a few
-    microseconds per write; :meth:`McapRecorder.batch` pays it once for a group
-    of writes.
+    original handlers as soon as the write is complete. A handler object with
+    ``hold()`` and ``release()`` methods (sim_node's, from
+    :mod:`vmas_ros.ros.startup`) is not swapped but asked to hold the signal
+    itself, which keeps a C-level handler chained in front of it (rclpy's, which
+    wakes the executor) installed. That costs a few microseconds per write;
+    :meth:`McapRecorder.batch` pays it once for a group of writes.
 """
 from __future__ import annotations
 
@@ -71,6 +74,7 @@ from vmas_ros.record._io import (  # noqa: F401 - re-exported
     _stale_split_files,
     _UnbufferedFile,
     qos_profile_yaml,
+    refuse_symlink,
     serialize_tf_message,
     split_path,
 )
@@ -119,6 +123,9 @@ class McapRecorder:
         ``"lz4"`` or ``"none"``.
     :param overwrite: replace an existing recording at ``path`` (including its
         ``<stem>_<n>.mcap`` split files); otherwise an existing file is an error.
+        A symlink at ``path`` is always refused (FileExistsError naming it and its
+        target), dangling or not: the recording would land where it points. Every
+        file is created new (``O_EXCL | O_NOFOLLOW``), never opened in place.
     :param defer_signals: block SIGINT/SIGTERM during a write from the main thread.
 
     Topic names are fully qualified: a name without a leading ``/`` gets one,
@@ -151,14 +158,15 @@ class McapRecorder:
         if compression == "zstd" and DEFAULT_COMPRESSION != "zstd":
             raise ValueError("compression='zstd' needs the zstandard package (pip install zstandard)")
         self._path = Path(path)
+        refuse_symlink(self._path)  # even with overwrite: a link is not a recording to replace
         stale = _stale_split_files(self._path)
-        if not overwrite and (self._path.exists() or stale):
+        present = os.path.lexists(self._path)
+        if not overwrite and (present or stale):
             raise FileExistsError(
-                f"{self._path if self._path.exists() else stale[0]} exists; "
-                "choose another path or pass overwrite=True"
+                f"{self._path if present else stale[0]} exists; choose another path or pass overwrite=True"
             )
-        for old in stale:
-            old.unlink()
+        for old in ([self._path] if present else []) + stale:
+            old.unlink()  # the files are created anew (O_EXCL), never opened where they are
         self._path.parent.mkdir(parents=True, exist_ok=True)
         self._topics = None if topics is None else frozenset(_absolute(t) for t in topics)
         self._max_bytes = max_bytes
@@ -218,7 +226,9 @@ class McapRecorder:
         """Record ``message`` (an rclpy message of ``type_name``, e.g.
         ``sensor_msgs/msg/LaserScan``) on ``topic`` at ``log_time_ns``.
 
-        ``serialized`` (CDR bytes of ``message``) skips the serialisation.
+        ``serialized`` (CDR bytes of ``message``) skips the serialisation;
+        otherwise the message is serialised with its CDR padding bytes zeroed
+        (:func:`vmas_ros.ros.cdr.serialize_zeroed`).
         ``qos`` ("reliable" or "best_effort") goes to the channel's
         ``offered_qos_profiles`` when the topic is first written. Returns False
         (and does nothing) for a topic the filter does not select.
@@ -228,9 +238,9 @@ class McapRecorder:
         if serialized is None:
             if message is None:
                 raise TypeError("write() needs a message or serialized bytes")
-            from rclpy.serialization import serialize_message
+            from vmas_ros.ros.cdr import serialize_zeroed
 
-            serialized = serialize_message(message)
+            serialized = serialize_zeroed(message)  # padding zeroed: same message, same bytes
         return self._record(topic, type_name, serialized, log_time_ns, qos)
 
     def write_raw(
@@ -315,8 +325,19 @@ class McapRecorder:
         old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
         noted: list = []
         # Python handlers (signal.getsignal is callable) are held; handlers installed from C
-        # (getsignal is None, e.g. rclpy's) run outside Python bytecode and are left alone
-        held = {sig: handler for sig in _DEFERRED if callable(handler := signal.getsignal(sig))}
+        # (getsignal is None, e.g. rclpy's) run outside Python bytecode and are left alone.
+        # A handler that can hold signals itself (hold/release, e.g. vmas_ros.ros.startup's)
+        # stays installed: swapping it would drop a C handler chained in front of it (rclpy's)
+        holders, held = [], {}
+        for sig in _DEFERRED:
+            handler = signal.getsignal(sig)
+            if hasattr(handler, "hold") and hasattr(handler, "release"):
+                if handler not in holders:
+                    holders.append(handler)
+            elif callable(handler):
+                held[sig] = handler
+        for holder in holders:
+            holder.hold()
         for sig in held:
             signal.signal(sig, lambda signum, frame: noted.append(signum))
         self._deferring += 1
@@ -327,6 +348,8 @@ class McapRecorder:
             for sig, handler in held.items():
                 signal.signal(sig, handler)
             signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+            for holder in holders:  # a signal it noted acts now (e.g. raises KeyboardInterrupt)
+                holder.release()
             for signum in noted:  # now, between writes, as if it had just arrived
                 held[signum](signum, None)
 

@@ -10,7 +10,9 @@ can tell the three apart by the exit code alone:
   crashed or produced NaN) prints the cause's traceback, then one line saying
   what failed, and exits with code 3 (:data:`EXIT_FAULT`): the node stops
   rather than publish garbage, and its bag is still finished;
-* SIGINT/SIGTERM (KeyboardInterrupt or an external shutdown) exit with 0.
+* SIGINT/SIGTERM (KeyboardInterrupt or an external shutdown) exit with 0; a
+  signal before the node is built (during the imports) too, when the entry
+  point installed ``startup.guard`` (the ``sim_node``/``policy_node`` programs do).
 
 In every case the node is destroyed before rclpy shuts down, which is where
 sim_node closes its bag: the bag is complete whichever way the node stops
@@ -26,6 +28,8 @@ from typing import Callable, List, Optional
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+
+from vmas_ros.ros import startup
 
 #: exit code for parameters refused at start
 EXIT_CONFIG = 2
@@ -51,6 +55,7 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
     node = None
     code = 0
     try:
+        startup.hand_over()  # a signal from here on stops the node (KeyboardInterrupt), see startup.py
         node = make_node()
         rclpy.spin(node)
     except ConfigError as error:
@@ -68,8 +73,9 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
             raise
         code = 0  # a callback raced the shutdown a signal started: still a clean exit
     finally:
-        # a second Ctrl-C (or a SIGINT sent to the whole process group) must not break the clean-up
+        # a second Ctrl-C or SIGTERM (or one sent to the whole process group) must not break the clean-up
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

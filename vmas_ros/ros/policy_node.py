@@ -12,11 +12,18 @@ An observation older than ``observation_timeout`` (wall-clock age since it
 arrived) is not acted on: a robot whose sensors stopped must not keep
 receiving commands computed from the past. Agents without a usable
 observation get nothing (sim_node's ``cmd_vel_timeout`` then stops them), and
-a throttled warning names them.
+a throttled warning names them. A publisher of the wrong message type on an
+input topic (which ROS never delivers) is named once in a warning, with the
+type expected (``topic_audit.py``, as sim_node does for its commands).
 """
 from __future__ import annotations
 
-import sys
+if __name__ == "__main__":  # run as a program: a signal during the heavy imports below must end it cleanly
+    from vmas_ros.ros.startup import guard
+
+    guard("policy_node")
+
+import sys  # noqa: E402 - after the guard on purpose
 import time
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -30,6 +37,7 @@ from vmas_ros.ros.convert import unique_names
 from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.params import (POLICY_NODE_RUNTIME, PolicyNodeParams, run_checked, unknown_parameters,
                                 validate_policy_node)
+from vmas_ros.ros.topic_audit import TopicAudit
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: accepts reliable and best-effort publishers (sensor drivers often publish best effort)
@@ -58,8 +66,10 @@ class PolicyNode(Node):
         except ValueError as error:
             raise ConfigError(f"adapter: {error}") from None
         self.latest: Dict[str, Tuple[Any, float]] = {}  # topic -> (message, monotonic arrival)
-        for topic, msg_type in topics.items():
-            self.create_subscription(msg_type, topic, lambda msg, t=topic: self._on_message(t, msg), ACCEPT_ANY)
+        inputs = [self.create_subscription(msg_type, topic, lambda msg, t=topic: self._on_message(t, msg), ACCEPT_ANY)
+                  for topic, msg_type in topics.items()]
+        # a publisher of another type on an input never matches: ROS drops it silently, so name it
+        self.topic_audit = TopicAudit.of_inputs(self, inputs, "policy_node")
         self._build_outputs()
         self._warned: Dict[str, float] = {}
         self.published = 0

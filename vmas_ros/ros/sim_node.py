@@ -19,7 +19,12 @@ every lidar is cast once per step in one batch (simulator/lidar_batch.py), and u
 """
 from __future__ import annotations
 
-import sys
+if __name__ == "__main__":  # run as a program: a signal during the heavy imports below must end it cleanly
+    from vmas_ros.ros.startup import guard
+
+    guard("sim_node")
+
+import sys  # noqa: E402 - after the guard on purpose
 import time
 from typing import Dict, List, Optional
 

@@ -7,7 +7,10 @@ does not move and no error anywhere. ``TopicAudit`` looks at the ROS graph
 every few seconds and names each such publisher once, with what was expected.
 
 It only reads the graph (no subscriptions are made), so it costs one graph
-query per period and never touches the messages themselves.
+query per period and never touches the messages themselves. sim_node audits
+its command topics (``of_sim_node``: unknown agents and wrong types);
+policy_node audits the inputs its adapter subscribes (``of_inputs``: wrong
+types only, since an adapter may read any topic).
 """
 from __future__ import annotations
 
@@ -24,16 +27,20 @@ class TopicAudit:
         node: the rclpy node (its graph queries, logger and timers are used).
         expected: fully qualified topic -> ``pkg/msg/Type`` the node subscribes
             there (e.g. ``/agent_0/cmd_vel`` -> ``geometry_msgs/msg/Twist``).
-        suffixes: last name parts that mark a command topic (``cmd_vel``, ``action``).
+        suffixes: last name parts that mark a command topic (``cmd_vel``, ``action``);
+            a publisher on ``<agent>/<suffix>`` for an agent not in ``expected`` is
+            reported too. Empty: only the topics in ``expected`` are audited.
         agents: the valid agent names, listed in the warning.
+        consequence: the end of the warning, what the user loses.
     """
 
     def __init__(self, node, expected: Dict[str, str], suffixes: Iterable[str], agents: Iterable[str],
-                 period: float = AUDIT_PERIOD_S) -> None:
+                 period: float = AUDIT_PERIOD_S, consequence: str = "its messages never reach an agent") -> None:
         self.node = node
         self.expected = dict(expected)
         self.suffixes = tuple(suffixes)
         self.agents = list(agents)
+        self.consequence = consequence
         namespace = node.get_namespace().rstrip("/")
         self.prefix = namespace + "/"
         self.reported: Set[Tuple[str, str]] = set()  # (topic, type) already warned about
@@ -48,14 +55,21 @@ class TopicAudit:
         expected.update({f"{namespace}/{n}/action": "std_msgs/msg/Float32MultiArray" for n in names})
         return cls(node, expected, ("cmd_vel", "action"), names)
 
+    @classmethod
+    def of_inputs(cls, node, subscriptions: Iterable, what: str) -> "TopicAudit":
+        """The audit of ``subscriptions`` (rclpy Subscription objects): a publisher of another type on
+        one of their topics is named once; ``what`` (e.g. "policy_node") ends the warning."""
+        expected = {sub.topic_name: type_name_of(sub.msg_type) for sub in subscriptions}
+        return cls(node, expected, (), (), consequence=f"{what} never receives its messages")
+
     def problems(self) -> List[Tuple[str, str, str]]:
-        """(topic, type, reason) of every publisher on a command topic that the node cannot take."""
+        """(topic, type, reason) of every publisher on an audited topic that the node cannot take."""
         found = []
         for topic, _ in self.node.get_topic_names_and_types():
-            parts = topic[len(self.prefix):].split("/") if topic.startswith(self.prefix) else []
-            if len(parts) != 2 or parts[1] not in self.suffixes:
-                continue
             want = self.expected.get(topic)
+            parts = topic[len(self.prefix):].split("/") if topic.startswith(self.prefix) else []
+            if want is None and (len(parts) != 2 or parts[1] not in self.suffixes):
+                continue
             for info in self.node.get_publishers_info_by_topic(topic):
                 kind = info.topic_type
                 if want is None:
@@ -74,6 +88,9 @@ class TopicAudit:
             if (topic, kind) in self.reported:
                 continue
             self.reported.add((topic, kind))
-            self.node.get_logger().warning(
-                f"ignoring a publisher of {kind} on {topic}: {reason}; its messages never reach an agent"
-            )
+            self.node.get_logger().warning(f"ignoring a publisher of {kind} on {topic}: {reason}; {self.consequence}")
+
+
+def type_name_of(message_class: type) -> str:
+    """``pkg/msg/Name`` of a message class, as the ROS graph reports types (e.g. std_msgs/msg/String)."""
+    return f"{message_class.__module__.split('.')[0]}/msg/{message_class.__name__}"
