@@ -146,6 +146,8 @@ def worlds(draw, with_joints: bool = False) -> WorldSpec:
     if with_joints:
         for _ in range(draw(st.integers(1, 2))):
             a, b = draw(st.lists(st.integers(0, n - 1), min_size=2, max_size=2, unique=True))
+            if any({a, b} == {j[0], j[1]} for j in joints):
+                continue  # one joint per pair of bodies (a second would add a rod of the same name)
             dist = draw(st.sampled_from([0.0, 0.1]) | st.floats(0.05, 0.6))
             anchor = st.tuples(st.sampled_from([-1.0, 0.0, 1.0]), st.sampled_from([-1.0, 0.0, 1.0]))
             rotate_a, rotate_b = (True, True) if dist == 0 else (draw(st.booleans()), draw(st.booleans()))
