@@ -214,7 +214,7 @@ class Environment:
             stacked = torch.stack(tensors)
             if stacked.dtype != torch.float32:
                 stacked = stacked.float()
-            low, high, center, half = self._stacked_bound_tensors()
+            low, high, low_ad, high_ad = self._stacked_bound_tensors()
             if self.clamp_action and self.continuous_actions:
                 # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
                 if not bool(torch.isfinite(stacked).all()):
@@ -223,9 +223,10 @@ class Environment:
                 stacked = torch.clamp(stacked, low, high)
                 tensors = list(stacked.unbind(0))
             else:
-                # |a - center| <= half is low <= a <= high (exact: the bounds are symmetric ranges, [0, 1] or
-                # [0, n - 1]) and false for NaN and inf, in three ops instead of five
-                if not bool(((stacked - center).abs() <= half).all()):
+                # the extremes over the batch against the bounds: one pass over the actions (NaN
+                # propagates through min/max and fails both comparisons)
+                smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
+                if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
                     act.check_finite_and_range(tensors, lows, highs, names, kind)
         elif self.clamp_action and self.continuous_actions:
             unbounded = [torch.full_like(low, float("inf")) for low in lows]
@@ -237,12 +238,12 @@ class Environment:
             self._apply_action(agent, action)
 
     def _stacked_bound_tensors(self):
-        """[A, 1, D] low, high, centre and half-width of all agents' bounds (same-shape actions only)."""
+        """[A, 1, D] low and high of all agents' bounds, and the same as [A, D] (same-shape actions only)."""
         cached = getattr(self, "_stacked_bound_cache", None)
         if cached is None or cached[0] != self.device:
             lows, highs = self._stacked_bounds()
             low, high = torch.stack(lows).unsqueeze(1), torch.stack(highs).unsqueeze(1)
-            cached = self._stacked_bound_cache = (self.device, low, high, (low + high) / 2, (high - low) / 2)
+            cached = self._stacked_bound_cache = (self.device, low, high, low[:, 0], high[:, 0])
         return cached[1:]
 
     def _stacked_bounds(self):

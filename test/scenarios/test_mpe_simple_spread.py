@@ -1,0 +1,34 @@
+"""simple_spread's two formulations (few envs: fewer calls; many envs: fewer passes) agree.
+
+The parity tests against VMAS run at a handful of envs, where the scenario
+takes the few-envs path; here the same states go through both paths.
+"""
+from __future__ import annotations
+
+import pytest
+import torch
+
+import vmas_ros
+from vmas_ros.scenarios.mpe import simple_spread
+
+BATCH = 2 * simple_spread.FEW_ENVS
+
+
+@pytest.mark.parametrize("n_agents", [3, 5])
+def test_many_envs_path_equals_few_envs_path(n_agents, device, monkeypatch):
+    env = vmas_ros.make_env("simple_spread", num_envs=BATCH, device=device, seed=3, n_agents=n_agents)
+    env.reset()
+    gen = torch.Generator().manual_seed(4)
+    # crowd the agents so that some overlap (the reward's collision term) in some envs
+    for agent in env.agents:
+        agent.set_pos(((torch.rand(BATCH, 2, generator=gen) - 0.5) * 0.6).to(device), batch_index=None)
+    env.step([torch.rand(BATCH, 2, generator=gen).to(device) * 2 - 1 for _ in env.agents])
+    scenario = env.scenario
+    many_rew, many_obs = scenario._reward_many_envs(), scenario._observations().clone()
+    scenario._obs_cache = None
+    monkeypatch.setattr(simple_spread, "FEW_ENVS", 10 ** 9)
+    few_rew, few_obs = scenario._reward_few_envs(), scenario._observations()
+    assert torch.equal(many_obs, few_obs)
+    torch.testing.assert_close(many_rew, few_rew, atol=1e-5, rtol=0)
+    spacing = torch.cdist(torch.stack([a.state.pos for a in env.agents], 1), torch.stack([a.state.pos for a in env.agents], 1))
+    assert ((spacing < 0.3).sum(dim=(1, 2)) > n_agents).any(), "some envs must have overlapping agents"
