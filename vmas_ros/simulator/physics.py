@@ -269,7 +269,7 @@ def _add_pairs_opposite(force: Tensor, index_a: Tensor, index_b: Tensor, on_a: T
     if force.shape[-1] < SCATTER_TRANSPOSE_BELOW:
         target, values = force.transpose(0, 1), on_a.transpose(0, 1)
         target.index_add_(0, index_a, values)
-        target.index_add_(0, index_b, values, alpha=-1)
+        target.index_add_(0, index_b, values.neg())  # alpha=-1 takes a slow path here (~9x at 1,000 agents)
     else:
         force.index_add_(1, index_a, on_a)
         force.index_add_(1, index_b, on_a, alpha=-1)
