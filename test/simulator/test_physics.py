@@ -393,3 +393,18 @@ def test_action_force_limits(device):
     torch.testing.assert_close(ranged.state.vel[0], T([0.05, -0.025], device), atol=1e-7, rtol=0)
     # the clamped force is written back, as in VMAS
     torch.testing.assert_close(capped.state.force[0], T([0.6, 0.8], device), atol=1e-7, rtol=0)
+
+
+# ----------------------------------------------------------------- contact magnitude
+def test_softplus_of_overlap_matches_logaddexp_where_contacts_are_active():
+    """The fast contact magnitude equals ``log(1 + exp(x))`` to float rounding for every ``x >= 0``
+    (active contacts), is finite below 0 (masked out later), and has the same gradient."""
+    from vmas_ros.simulator.contacts import softplus_of_overlap
+
+    x = torch.linspace(0, 60, 200_001)
+    exact = torch.logaddexp(torch.zeros(()), x.double()).float()
+    torch.testing.assert_close(softplus_of_overlap(x.clone()), exact, rtol=2.5e-7, atol=0)
+    assert torch.isfinite(softplus_of_overlap(torch.tensor([-1e6, -200.0, -1.0]))).all()
+    xg = torch.linspace(0, 30, 301, requires_grad=True)
+    softplus_of_overlap(xg).sum().backward()
+    torch.testing.assert_close(xg.grad, torch.sigmoid(xg.detach()), rtol=1e-6, atol=1e-7)

@@ -56,8 +56,11 @@ from vmas_ros.scenarios.flocking import (
     pairwise_distances,
     sample_clear_positions,
 )
+from vmas_ros.simulator.contacts import mask_ge, mask_lt
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.layout import join_xy
+from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import Color
@@ -85,7 +88,7 @@ def is_agent(entity) -> bool:
     return entity.name.startswith("agent")
 
 
-#: candidate points drawn per respawning target and env (the first clear one is taken)
+#: candidate points drawn per env and step for respawns, shared by all its targets (see respawn_clear)
 RESPAWN_CANDIDATES = 16
 
 
@@ -125,6 +128,7 @@ class Scenario(BaseScenario):
             self.targets.append(target)
 
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
+        self._lidars = [AgentLidars(world, world.agents, slot) for slot in range(len(world.agents[0].sensors))]
         self._not_self = ~torch.eye(self.n_agents, dtype=torch.bool, device=device)
         #: per env and target: covered at some step of this episode (only grows without respawns) [B, T]
         self.all_time_covered = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
@@ -170,26 +174,25 @@ class Scenario(BaseScenario):
 
     def _move_covered_targets(self) -> None:
         """Respawn (or retire) the targets covered this step; runs after every agent's reward."""
-        covered = self.covered_targets
-        if not self.targets_respawn:
-            self.all_time_covered = self.all_time_covered | covered
-        bounds = (-self.x_semidim, self.x_semidim), (-self.y_semidim, self.y_semidim)
-        for i, target in enumerate(self.targets):
-            if self.targets_respawn:
-                others = self._stack([t for t in self.targets if t is not target])
-                occupied = torch.cat([self._agents_pos, others], dim=1)
-                # this runs every step for every env (no host read to skip it), so few candidates:
-                # with the default density all 16 are blocked with probability ~1e-7
-                fresh = sample_clear_positions(
-                    occupied, 1, self.min_dist_between_entities, *bounds, candidates=RESPAWN_CANDIDATES,
-                )[:, 0]
-            else:
-                fresh = self._outside_positions(covered.shape[0])
-            target.set_pos(torch.where(covered[:, i, None], fresh, target.state.pos), batch_index=None)
+        covered = self.covered_targets.T  # [T, B]
+        x, y = self.world.stacked_xy("pos")  # targets are the landmarks, the first rows
+        n_targets = len(self.targets)
+        if self.targets_respawn:
+            new_x, new_y = respawn_clear(
+                x[n_targets:], y[n_targets:], x[:n_targets], y[:n_targets], covered,
+                self.min_dist_between_entities, self.x_semidim, self.y_semidim, RESPAWN_CANDIDATES,
+            )
+            new = join_xy(new_x, new_y)  # [T, B, 2]
+        else:
+            self.all_time_covered = self.all_time_covered | self.covered_targets
+            old = self._stack(self.targets).transpose(0, 1)  # [T, B, 2]
+            new = torch.where(covered.unsqueeze(-1), self._outside_positions(covered.shape), old)
+        for target, pos in zip(self.targets, new.unbind(0)):
+            target.set_pos(pos, batch_index=None)
 
-    def _outside_positions(self, rows: int) -> Tensor:
+    def _outside_positions(self, shape) -> Tensor:
         """Far outside the arena, where no lidar or agent reaches: both coordinates in [-1000, -10] x x_semidim."""
-        return torch.empty(rows, self.world.dim_p, device=self.world.device).uniform_(
+        return torch.empty(*shape, self.world.dim_p, device=self.world.device).uniform_(
             -1000 * self.x_semidim, -10 * self.x_semidim,
         )
 
@@ -205,7 +208,7 @@ class Scenario(BaseScenario):
 
     # ------------------------------------------------------------- observation
     def observation(self, agent: Agent) -> Tensor:
-        readings = [sensor.measure() for sensor in agent.sensors]
+        readings = [lidars.reading(agent) for lidars in self._lidars]
         return torch.cat([agent.state.pos, agent.state.vel] + readings, dim=-1)
 
     def info(self, agent: Agent) -> dict[str, Tensor]:
@@ -238,6 +241,72 @@ class Scenario(BaseScenario):
             line.set_color(*Color.BLACK.value)
             geoms.append(line)
         return geoms
+
+
+def respawn_clear(
+    agents_x: Tensor, agents_y: Tensor, targets_x: Tensor, targets_y: Tensor, covered: Tensor,
+    min_dist: float, x_semidim: float, y_semidim: float, candidates: int,
+) -> tuple[Tensor, Tensor]:
+    """New target positions ``(x, y)``, each ``[T, B]``: covered targets moved, the others kept.
+
+    Inputs are planar rows: agents ``[N, B]``, targets ``[T, B]``, ``covered``
+    ``[T, B]`` (bool). Targets move in order; target ``i`` lands on a uniform
+    spot in the arena ``min_dist`` clear of every agent, of the new spots of
+    targets before it and of the current spots of the targets after it (the
+    order VMAS moves them in).
+
+    Why it is fast: each env draws one stream of ``candidates`` uniform
+    points per step, shared by all its targets, instead of a set per target
+    (covering is rare, so most draws would go unused). Target ``i`` takes the
+    first clear point *after* the last point an earlier target took: points it
+    scans were never looked at before, so this is exact rejection sampling.
+    Distances to the agents are computed once for all targets, the targets
+    after ``i`` enter through one suffix minimum, and those before through a
+    running minimum, so each target costs a dozen ops over ``[B, candidates]``.
+    A covered target that finds no clear point in the rest of the stream
+    (probability about ``0.35 ** 16`` at the default density) stays for a step
+    and respawns on the next one, when it is still covered.
+    """
+    n_targets, batch = targets_x.shape
+    device = targets_x.device
+    # candidates [K, B]: every reduction below runs over the leading dim, across contiguous env rows
+    # (a reduction over a small trailing dim is a slow path on the CPU), and masks are float 0/1
+    cand_x = torch.empty(candidates, batch, device=device).uniform_(-x_semidim, x_semidim)
+    cand_y = torch.empty(candidates, batch, device=device).uniform_(-y_semidim, y_semidim)
+    limit = min_dist * min_dist
+
+    def squared_gaps(px: Tensor, py: Tensor) -> Tensor:  # points [M, B] -> [M, K, B]
+        gap_x, gap_y = cand_x - px.unsqueeze(1), cand_y - py.unsqueeze(1)
+        return torch.addcmul(gap_x * gap_x, gap_y, gap_y)
+
+    # a point's weight falls along the stream, so the first clear point has the largest weighted mask
+    weights = torch.arange(candidates, 0, -1, device=device, dtype=cand_x.dtype).unsqueeze(1)  # [K, 1]
+    free = weights.expand(candidates, batch) if agents_x.shape[0] == 0 else \
+        mask_ge(squared_gaps(agents_x, agents_y).amin(dim=0), limit).mul_(weights)
+    to_targets = squared_gaps(targets_x, targets_y)  # [T, K, B] to the current spots
+    after = [None] * (n_targets + 1)  # after[i]: nearest current spot among targets i+1..
+    for i in range(n_targets - 2, -1, -1):
+        after[i] = to_targets[i + 1] if after[i + 1] is None else torch.minimum(after[i + 1], to_targets[i + 1])
+    before = None  # nearest new spot among the targets moved so far
+    bound = torch.full((1, batch), candidates + 1.0, device=device)  # eligible: weight < bound
+    new_x, new_y = [], []
+    for i in range(n_targets):
+        near = after[i] if before is None else before if after[i] is None else torch.minimum(before, after[i])
+        eligible = free * mask_lt(weights, bound)
+        if near is not None:
+            eligible = eligible.mul_(mask_ge(near, limit))
+        score = eligible.amax(dim=0, keepdim=True)  # [1, B]: the first clear point's weight, 0 if none
+        moved = (score > 0) & covered[i : i + 1]  # [1, B] bool: where on one row is cheap
+        first = (candidates - score).clamp_(max=candidates - 1).long()
+        x = torch.where(moved, cand_x.gather(0, first), targets_x[i : i + 1])
+        y = torch.where(moved, cand_y.gather(0, first), targets_y[i : i + 1])
+        new_x.append(x)
+        new_y.append(y)
+        if i + 1 < n_targets:
+            gaps = squared_gaps(x, y)[0]
+            before = gaps if before is None else torch.minimum(before, gaps)
+            bound = torch.where(moved, score, bound)
+    return torch.cat(new_x), torch.cat(new_y)
 
 
 def _validate(config: dict) -> None:

@@ -82,6 +82,8 @@ def mask_eq(a: Tensor, b) -> Tensor:
 def _broadcast_shape(a: Tensor, b) -> Tuple[int, ...]:
     if not isinstance(b, Tensor) or b.shape == a.shape:
         return tuple(a.shape)
+    if torch.compiler.is_compiling():  # the plain-Python loop breaks the compiled graph
+        return tuple(torch.broadcast_shapes(a.shape, b.shape))
     return geo.broadcast_shape(a.shape, b.shape)
 
 
@@ -101,9 +103,26 @@ def cross(rx: Tensor, ry: Tensor, fx: Tensor, fy: Tensor) -> Tensor:
     return rx * fy - ry * fx
 
 
+def softplus_of_overlap(overlap: Tensor) -> Tensor:
+    """``log(1 + exp(overlap))`` where ``overlap >= 0``, and a finite stand-in elsewhere.
+
+    A repulsive contact is active only where ``dist <= dist_min``, i.e. where
+    its scaled overlap ``(dist_min - dist) / margin`` is non-negative; other
+    entries are masked to zero afterwards, so their value only needs to be
+    finite. There ``x - log(sigmoid(x))`` equals ``log(1 + exp(x))`` to float
+    rounding, and this torch build vectorises ``sigmoid`` and ``log`` far
+    better than ``logaddexp`` (about 2.3x faster over ``[pairs, envs]``).
+    Clamping at 0 keeps ``sigmoid`` away from underflow (``log(0)``).
+    """
+    x = overlap.clamp_min(0.0)
+    if x.requires_grad and torch.is_grad_enabled():
+        return x - torch.sigmoid(x).log()  # autograd keeps sigmoid's output
+    return x.sub_(torch.sigmoid(x).log_())
+
+
 def soft_contact(
     dx: Tensor, dy: Tensor, dist: Tensor, dist_min: Tensor, strength: float, margin: float,
-    attractive: bool = False, gate: Optional[Tensor] = None,
+    attractive: bool = False, gate: Optional[Tensor] = None, exact: bool = True,
 ) -> Tuple[Tensor, Tensor]:
     """Force ``(fx, fy)`` on ``a`` from the soft penetration model; ``b`` gets the opposite.
 
@@ -111,9 +130,13 @@ def soft_contact(
     ``a`` away while ``dist <= dist_min``; attractive (joints): pulls ``a`` back
     while ``dist >= dist_min``. Magnitude ``strength * margin * log(1 + exp(+-(dist_min - dist) / margin))``.
     ``gate`` (float 0/1) switches the contact off where it is 0 (the broad phase).
+    ``exact``: VMAS's ``logaddexp``; otherwise (repulsive only) :func:`softplus_of_overlap`.
     """
     sign = -1.0 if attractive else 1.0
-    penetration = torch.logaddexp(_zero(dist), (dist_min - dist) * sign / margin) * margin
+    if exact or attractive:
+        penetration = torch.logaddexp(_zero(dist), (dist_min - dist) * sign / margin) * margin
+    else:
+        penetration = softplus_of_overlap((dist_min - dist) / margin) * margin
     active = mask_ge(dist, MIN_CONTACT_DIST) * (mask_le(dist, dist_min) if not attractive else mask_ge(dist, dist_min))
     if gate is not None:
         active = active * gate
@@ -164,7 +187,7 @@ def sphere_pair_forces(pair: PairTable, xy: Tensor, params, exact: bool = False)
         return d * params.collision_force / dist.clamp_min(1e-8) * scale
     dist = torch.addcmul(d[0] * d[0], d[1], d[1]).sqrt_()
     active = mask_ge(dist, MIN_CONTACT_DIST).mul_(mask_le(dist, dist_min))
-    scale = torch.logaddexp(_zero(dist), (dist_min - dist) / margin).mul_(active).div_(dist.clamp_min(1e-8))
+    scale = softplus_of_overlap((dist_min - dist) / margin).mul_(active).div_(dist.clamp_min(1e-8))
     return d * scale.mul_(params.collision_force * margin)
 
 
@@ -205,11 +228,11 @@ def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params, exa
     def push(ax, ay, bx, by, dist_min):
         """Force on the first point from the second one (both given as points)."""
         ddx, ddy = ax - bx, ay - by
-        return soft_contact(ddx, ddy, length(ddx, ddy), dist_min, strength, margin, gate=gate)
+        return soft_contact(ddx, ddy, length(ddx, ddy), dist_min, strength, margin, gate=gate, exact=exact)
 
     if kind == ("sphere", "sphere"):
         # the contact points are the centres: reuse the broad phase's offset and distance
-        fx, fy = soft_contact(dx, dy, gap, p["a_radius"] + p["b_radius"], strength, margin, gate=gate)
+        fx, fy = soft_contact(dx, dy, gap, p["a_radius"] + p["b_radius"], strength, margin, gate=gate, exact=exact)
         return fx, fy, -fx, -fy, None, None
     ra, rb = rows(rot, ia), rows(rot, ib)
     if kind == ("line", "sphere"):

@@ -85,6 +85,13 @@ def ray_sphere_xy(
     along = torch.addcmul(to_cx * cos_a, to_cy, sin_a)
     beyond_sq = torch.addcmul(to_cx * to_cx, to_cy, to_cy) - radius * radius  # |c|^2 - r^2, per target and env
     half_chord_sq = torch.addcmul(-beyond_sq, along, along)
+    if not (torch.is_grad_enabled() and half_chord_sq.requires_grad):
+        # the same arithmetic in place: three [E, B, R] temporaries instead of eight (each fresh
+        # large temporary costs page faults on the CPU)
+        hit = torch.minimum(half_chord_sq, along)
+        hit = torch.gt(hit, 0.0, out=hit)
+        half_chord = half_chord_sq.clamp_min_(_TINY).sqrt_()
+        return along.sub_(half_chord).sub_(max_range).mul_(hit).add_(max_range)
     hit = mask_gt(torch.minimum(half_chord_sq, along), 0.0)
     half_chord = half_chord_sq.clamp_min(_TINY).sqrt()
     max_range = _as_tensor(max_range, along)
