@@ -248,3 +248,22 @@ def test_heuristic_moves_default_packages():
     heuristic, random = transport.HeuristicPolicy(), RandomPolicy()
     (h_return, _), (r_return, _) = (run(make(16), p, 150) for p in (heuristic, random))
     assert h_return > 6 and abs(r_return) < 2, (h_return, r_return)
+
+
+def test_cached_observations_follow_the_state_and_never_alias():
+    """Observations are built once per state for all agents: moving the package (a set_pos, no step)
+    shows in the next collection, each agent's offset is its own, and a second collection of the same
+    state is a different tensor (handed out without the env's copy)."""
+    env = make(3, n_packages=2)
+    env.reset()
+    first = env.get_from_scenario(True, False, False, False)[0]
+    again = env.get_from_scenario(True, False, False, False)[0]
+    assert all(torch.equal(a, b) and a.data_ptr() != b.data_ptr() for a, b in zip(first, again))
+    package = env.scenario.packages[1]
+    package.set_pos(package.state.pos + 0.25, batch_index=None)
+    moved = env.get_from_scenario(True, False, False, False)[0]
+    block = transport.OWN_BLOCK + transport.PACKAGE_BLOCK  # the second package's block
+    for agent, obs in zip(env.agents, moved):
+        expected = torch.cat([package.state.pos - env.scenario.goal.state.pos, package.state.pos - agent.state.pos], -1)
+        torch.testing.assert_close(obs[:, block : block + 4], expected, rtol=0, atol=0)
+    assert not torch.equal(moved[0], first[0])

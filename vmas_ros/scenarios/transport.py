@@ -36,10 +36,11 @@ import torch
 
 from vmas_ros.scenarios import packages as pk
 from vmas_ros.scenarios.common import read_kwargs, selected_rows
+from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color
+from vmas_ros.simulator.utils import LINE_MIN_DIST, Color
 
 AGENT_RADIUS = 0.03
 AGENT_U_MULTIPLIER = 0.6
@@ -57,6 +58,7 @@ DEFAULTS = {"n_agents": 4, "n_packages": 1, "package_width": 0.15, "package_leng
 
 class Scenario(BaseScenario):
     supports_batched_reset = True
+    fresh_observations = True  # views of one result computed per collection, never written to
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         options = read_kwargs(kwargs, DEFAULTS)
@@ -89,6 +91,8 @@ class Scenario(BaseScenario):
         #: whether each package overlaps the goal, as of the last reward (or reset), [B, P]
         self.on_goal = torch.zeros(batch_dim, self.n_packages, dtype=torch.bool, device=world.device)
         self._reward = torch.zeros(batch_dim, device=world.device)
+        self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
+        self._obs_cache = None  # (pos stack, vel stack, on_goal, observations) of the last state observed
         return world
 
     # ------------------------------------------------------------------- reset
@@ -115,10 +119,25 @@ class Scenario(BaseScenario):
         return torch.stack([p.state.pos for p in self.packages], dim=1)  # [B, P, 2]
 
     def _package_status(self):
-        """Each package's distance to the goal and whether it overlaps it, both [B, P]."""
-        distance = torch.linalg.vector_norm(self._package_pos() - self.goal.state.pos.unsqueeze(1), dim=-1)
-        on_goal = torch.stack([self.world.is_overlapping(p, self.goal) for p in self.packages], dim=1)
-        return distance, on_goal
+        """Each package's distance to the goal and whether it overlaps it, both [B, P].
+
+        All packages at once on planar rows (``World.stacked_xy``), with the box
+        boundary found in the box frame: the same test as
+        ``World.is_overlapping`` (the goal's centre closer to the package's than
+        the boundary point nearest it, or that point within the goal's reach),
+        equal to float rounding, in a fraction of the passes.
+        """
+        world = self.world
+        x, y = world.stacked_xy("pos")  # landmarks first: the goal, then the packages
+        rot = world.stacked_state("rot")[1 : 1 + self.n_packages, :, 0]
+        px, py, gx, gy = x[1 : 1 + self.n_packages], y[1 : 1 + self.n_packages], x[:1], y[:1]
+        distance = _hypot(px - gx, py - gy)
+        qx, qy = geo.closest_point_on_box_boundary_in_frame(
+            px, py, rot, px.new_tensor(self.package_length), px.new_tensor(self.package_width), gx, gy,
+        )
+        inside = distance < _hypot(px - qx, py - qy)
+        touching = _hypot(gx - qx, gy - qy) < GOAL_RADIUS + LINE_MIN_DIST
+        return distance.T, (inside | touching).T
 
     def _paint(self) -> None:
         for package, color in zip(self.packages, pk.package_colors(self.on_goal).unbind(1)):
@@ -137,17 +156,45 @@ class Scenario(BaseScenario):
 
     # ------------------------------------------------------------- observation
     def observation(self, agent: Agent) -> torch.Tensor:
-        packages = self._package_pos()
-        blocks = torch.cat([
-            packages - self.goal.state.pos.unsqueeze(1),
-            packages - agent.state.pos.unsqueeze(1),
-            torch.stack([p.state.vel for p in self.packages], dim=1),
-            self.on_goal.unsqueeze(-1).float(),
-        ], dim=-1)  # [B, P, PACKAGE_BLOCK]
-        return torch.cat([agent.state.pos, agent.state.vel, blocks.flatten(1)], dim=-1)
+        index = self._agent_index[agent.name]
+        observation = self._observations()[index]
+        if index == self.n_agents - 1:
+            # the environment asks in agent order: the next collection computes afresh, so observations
+            # handed out without a copy (fresh_observations) never alias a later collection's
+            self._obs_cache = None
+        return observation
+
+    def _observations(self) -> torch.Tensor:
+        """Every agent's observation ``[A, B, obs]``, written into one tensor once per state.
+
+        Keyed on the identity of the world's stacked positions and velocities
+        (rebuilt whenever any entity's state changes) and of ``on_goal``
+        (replaced by every reward), so a cached result is never stale.
+        """
+        world = self.world
+        pos, vel = world.stacked_state("pos"), world.stacked_state("vel")  # the goal, packages, agents
+        cached = self._obs_cache
+        if cached is not None and cached[0] is pos and cached[1] is vel and cached[2] is self.on_goal:
+            return cached[3]
+        n_packages, n_agents = self.n_packages, self.n_agents
+        packages, agents = pos[1 : 1 + n_packages].transpose(0, 1), pos[1 + n_packages :]  # [B, P, 2], [A, B, 2]
+        out = pos.new_empty(n_agents, pos.shape[1], OWN_BLOCK + PACKAGE_BLOCK * n_packages)
+        out[..., 0:2] = agents
+        out[..., 2:4] = vel[1 + n_packages :]
+        blocks = out[..., OWN_BLOCK:].view(n_agents, pos.shape[1], n_packages, PACKAGE_BLOCK)
+        blocks[..., 0:2] = packages - pos[0].unsqueeze(1)
+        blocks[..., 2:4] = packages.unsqueeze(0) - agents.unsqueeze(2)
+        blocks[..., 4:6] = vel[1 : 1 + n_packages].transpose(0, 1)
+        blocks[..., 6] = self.on_goal
+        self._obs_cache = (pos, vel, self.on_goal, out)
+        return out
 
     def done(self) -> torch.Tensor:
         return self.on_goal.all(dim=-1)
+
+
+def _hypot(dx: torch.Tensor, dy: torch.Tensor) -> torch.Tensor:
+    return torch.addcmul(dx * dx, dy, dy).sqrt_()
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):
