@@ -228,7 +228,7 @@ def pair_contact(pair: PairTable, x: Tensor, y: Tensor, rot: Tensor, params, exa
     def push(ax, ay, bx, by, dist_min):
         """Force on the first point from the second one (both given as points)."""
         ddx, ddy = ax - bx, ay - by
-        return soft_contact(ddx, ddy, length(ddx, ddy), dist_min, strength, margin, gate=gate, exact=exact)
+        return soft_contact(ddx, ddy, length(ddx, ddy), dist_min, strength, margin, gate=gate)
 
     if kind == ("sphere", "sphere"):
         # the contact points are the centres: reuse the broad phase's offset and distance
