@@ -10,8 +10,8 @@ the nearest hit is taken. The intersection functions are the engine's own
 distance is the same number ``measure`` computes.
 
 Exactness needs care only with trigonometry, whose vectorised and scalar kernels
-may differ in the last bit: the ray directions are computed per lidar on the
-same ``[B, R]`` tensors as ``measure`` does, and box/line headings only when
+may differ in the last bit: the ray directions come from each lidar's own
+``ray_directions()``, as in ``measure``, and box/line headings only when
 every lidar has the same targets of that kind (the same stacked tensor as in
 ``measure``). Lidars that do not fit (another ray count or range, or differing
 box/line targets) are measured one by one. test/ros/test_publish.py compares the
@@ -92,10 +92,10 @@ class BatchedLidars:
         if groups is None:
             return None
         with contextlib.nullcontext() if keep_grad else torch.no_grad():
-            # per lidar, exactly measure()'s angles, cosines and sines
-            angles = [s.angles + s.agent.state.rot for s in sensors]
-            cos_a = torch.stack([torch.cos(a) for a in angles]).unsqueeze(0)  # [1, L, B, R]
-            sin_a = torch.stack([torch.sin(a) for a in angles]).unsqueeze(0)
+            # per lidar, exactly measure()'s ray directions
+            directions = [s.ray_directions() for s in sensors]
+            cos_a = torch.stack([c for c, _ in directions]).unsqueeze(0)  # [1, L, B, R]
+            sin_a = torch.stack([s for _, s in directions]).unsqueeze(0)
             origin = torch.stack([s.agent.state.pos for s in sensors]).unsqueeze(0)  # [1, L, B, 2]
             ox, oy = origin[..., 0:1], origin[..., 1:2]  # [1, L, B, 1]
             nearest = torch.full_like(cos_a[0], max_range)  # [L, B, R]

@@ -40,6 +40,10 @@ class Sensor(abc.ABC):
         """Move internal tensors to ``device``."""
 
 
+#: Lidar.ray_directions takes cos/sin of every ray directly up to this many envs x rays
+DIRECT_TRIG_MAX_ELEMENTS = 4096
+
+
 class Lidar(Sensor):
     """A 2D range finder: ``n_rays`` rays at angles relative to the agent's heading.
 
@@ -77,6 +81,7 @@ class Lidar(Sensor):
         self._alpha = alpha
         self._render = render
         self._last_measurement: Optional[Tensor] = None
+        self._unit_rays: Optional[tuple] = None  # (device and dtype, cos, sin) of the relative angles [1, R]
 
     n_rays = property(lambda self: self._angles.shape[1])
     max_range = property(lambda self: self._max_range)
@@ -106,11 +111,32 @@ class Lidar(Sensor):
     def set_render(self, render: bool) -> None:
         self._render = render
 
+    def ray_directions(self) -> Tuple[Tensor, Tensor]:
+        """``(cos, sin)`` of every ray's world angle, each ``[batch, n_rays]``.
+
+        ``cos(a + rot) = cos a cos rot - sin a sin rot``: the relative angles'
+        cosines and sines are computed once, so a cast costs two trigonometric
+        calls per env instead of two per ray (they were a fifth of a LIDAR
+        scenario's observation). Equal to ``cos(angles + rot)`` to float rounding.
+        Up to ``DIRECT_TRIG_MAX_ELEMENTS`` envs x rays the direct form is used:
+        there the number of calls, not the passes, is the cost.
+        """
+        rot = self._agent.state.rot  # [B, 1]
+        if self._angles.numel() <= DIRECT_TRIG_MAX_ELEMENTS:  # few rays: fewer calls win
+            angles = self._angles + rot
+            return torch.cos(angles), torch.sin(angles)
+        key = (self._angles.device, self._angles.dtype)
+        if self._unit_rays is None or self._unit_rays[0] != key:
+            row = self._angles[:1]  # every env has the same relative angles
+            self._unit_rays = (key, torch.cos(row), torch.sin(row))
+        _, cos0, sin0 = self._unit_rays
+        cos_r, sin_r = torch.cos(rot), torch.sin(rot)
+        return torch.addcmul(cos0 * cos_r, sin0, sin_r, value=-1), torch.addcmul(sin0 * cos_r, cos0, sin_r)
+
     def measure(self, vectorized: bool = True) -> Tensor:
         """Distances [batch, n_rays]; all rays and target entities in one batched cast."""
-        measurement = self._world.cast_rays(
-            self._agent, self._angles + self._agent.state.rot, self._max_range, self._entity_filter
-        )
+        cos_a, sin_a = self.ray_directions()
+        measurement = self._world.cast_rays_along(self._agent, cos_a, sin_a, self._max_range, self._entity_filter)
         self._last_measurement = measurement
         return measurement
 

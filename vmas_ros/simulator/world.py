@@ -480,13 +480,24 @@ class World:
 
     def cast_rays(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
         """Distances [B, R] along rays at world ``angles`` [B, R]; ``max_range`` where nothing is hit."""
+        return self.cast_rays_along(entity, torch.cos(angles), torch.sin(angles), max_range, entity_filter)
+
+    def cast_rays_along(
+        self, entity: Entity, cos_a: Tensor, sin_a: Tensor, max_range: float,
+        entity_filter: Callable[[Entity], bool] = lambda _: False,
+    ) -> Tensor:
+        """:meth:`cast_rays` for rays given by their direction ``(cos, sin)``, each ``[B, R]``.
+
+        For sensors that know their directions more cheaply than by two
+        transcendental passes over ``[B, R]`` (see ``Lidar.ray_directions``).
+        """
         targets = self.ray_targets(entity, entity_filter)
         # rays [1, B, R] against targets [E, B, 1]: every op runs over contiguous [B, R] blocks
         # and the nearest hit is a reduction over the leading dim
         origin = entity.state.pos
         ox, oy = origin[:, 0].view(1, -1, 1), origin[:, 1].view(1, -1, 1)
-        cos_a, sin_a = torch.cos(angles).unsqueeze(0), torch.sin(angles).unsqueeze(0)
-        nearest = torch.full_like(angles, float(max_range))
+        nearest = torch.full_like(cos_a, float(max_range))
+        cos_a, sin_a = cos_a.unsqueeze(0), sin_a.unsqueeze(0)
         for kind in ("box", "sphere", "line"):
             group = [e for e in targets if e.shape.kind == kind]
             if not group:
