@@ -129,14 +129,14 @@ class Scenario(BaseScenario):
 
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._lidars = [AgentLidars(world, world.agents, slot) for slot in range(len(world.agents[0].sensors))]
-        self._not_self = ~torch.eye(self.n_agents, dtype=torch.bool, device=device)
+        self._not_self = ~torch.eye(self.n_agents, dtype=torch.bool, device=device).unsqueeze(-1)  # [N, N, 1]
         #: per env and target: covered at some step of this episode (only grows without respawns) [B, T]
         self.all_time_covered = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
         #: per env and target: covered at the last reward [B, T]
         self.covered_targets = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
-        #: per env and agent: the last reward's terms [B, N]; the team's covering reward [B]
-        self.covering_rew = torch.zeros(batch_dim, self.n_agents, device=device)
-        self.collision_rew = torch.zeros(batch_dim, self.n_agents, device=device)
+        #: per agent and env: the last reward's terms [N, B] (agent-major); the team's covering reward [B]
+        self.covering_rew = torch.zeros(self.n_agents, batch_dim, device=device)
+        self.collision_rew = torch.zeros(self.n_agents, batch_dim, device=device)
         self.shared_covering_rew = torch.zeros(batch_dim, device=device)
         return world
 
@@ -159,18 +159,25 @@ class Scenario(BaseScenario):
         return torch.stack([e.state.pos for e in entities], dim=1)
 
     def _update_rewards(self) -> None:
-        """Every agent's reward terms and the covered targets of this step, in one batched pass."""
-        agents_pos, targets_pos = self._stack(self.world.agents), self._stack(self.targets)
-        dist = torch.linalg.vector_norm(agents_pos.unsqueeze(2) - targets_pos.unsqueeze(1), dim=-1)  # [B, N, T]
-        near = dist < self.covering_range
-        self.covered_targets = near.sum(dim=1) >= self.agents_per_target  # [B, T]
-        self.covering_rew = (near & self.covered_targets.unsqueeze(1)).sum(dim=-1).float() * self.covering_rew_coeff
-        team = self.covering_rew.sum(dim=-1)
+        """Every agent's reward terms and the covered targets of this step, in one batched pass.
+
+        On planar rows (``World.stacked_xy``): distances ``[agents, targets, envs]``
+        as ``sqrt(dx * dx + dy * dy)`` and every count a reduction over a leading
+        dim (a norm or a sum over a small trailing dim is a slow path on the CPU).
+        Terms are kept agent-major, ``[n_agents, B]``, so each agent's reward is a row.
+        """
+        x, y = self.world.stacked_xy("pos")  # the targets (landmarks) first, then the agents
+        n_targets = self.n_targets
+        tx, ty, ax, ay = x[:n_targets], y[:n_targets], x[n_targets:], y[n_targets:]
+        near = _distances(ax, ay, tx, ty) < self.covering_range  # [N, T, B]
+        covered = near.sum(dim=0) >= self.agents_per_target  # [T, B]
+        self.covered_targets = covered.T  # [B, T]
+        self.covering_rew = (near & covered).sum(dim=1).float() * self.covering_rew_coeff  # [N, B]
+        team = self.covering_rew.sum(dim=0)
         self.shared_covering_rew = torch.where(team != 0, team / 2, team)  # halved, as in VMAS 1.5
-        gap = pairwise_distances(agents_pos) - 2 * AGENT_RADIUS
+        gap = _distances(ax, ay, ax, ay) - 2 * AGENT_RADIUS  # [N, N, B]
         touching = (gap < COLLISION_DISTANCE) & self._not_self
-        self.collision_rew = touching.sum(dim=-1).float() * self.agent_collision_penalty
-        self._agents_pos = agents_pos
+        self.collision_rew = touching.sum(dim=1).float() * self.agent_collision_penalty  # [N, B]
 
     def _move_covered_targets(self) -> None:
         """Respawn (or retire) the targets covered this step; runs after every agent's reward."""
@@ -200,8 +207,8 @@ class Scenario(BaseScenario):
         i = self._index[agent.name]
         if i == 0:
             self._update_rewards()
-        covering = self.shared_covering_rew if self.shared_reward else self.covering_rew[:, i]
-        rew = self.collision_rew[:, i] + covering + self.time_penalty
+        covering = self.shared_covering_rew if self.shared_reward else self.covering_rew[i]
+        rew = self.collision_rew[i] + covering + self.time_penalty
         if i == self.n_agents - 1:
             self._move_covered_targets()
         return rew
@@ -214,8 +221,8 @@ class Scenario(BaseScenario):
     def info(self, agent: Agent) -> dict[str, Tensor]:
         i = self._index[agent.name]
         return {
-            "covering_reward": self.shared_covering_rew if self.shared_reward else self.covering_rew[:, i],
-            "collision_rew": self.collision_rew[:, i],
+            "covering_reward": self.shared_covering_rew if self.shared_reward else self.covering_rew[i],
+            "collision_rew": self.collision_rew[i],
             "targets_covered": self.covered_targets.sum(dim=-1),
         }
 
@@ -241,6 +248,13 @@ class Scenario(BaseScenario):
             line.set_color(*Color.BLACK.value)
             geoms.append(line)
         return geoms
+
+
+def _distances(ax: Tensor, ay: Tensor, bx: Tensor, by: Tensor) -> Tensor:
+    """Distances ``[I, J, B]`` between points ``(ax, ay)`` ``[I, B]`` and ``(bx, by)`` ``[J, B]``."""
+    dx, dy = ax.unsqueeze(1) - bx.unsqueeze(0), ay.unsqueeze(1) - by.unsqueeze(0)
+    # the floor keeps the root's gradient finite where two points coincide (an agent to itself)
+    return torch.addcmul(dx * dx, dy, dy).clamp_min(1e-30).sqrt()
 
 
 def respawn_clear(
