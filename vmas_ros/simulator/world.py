@@ -8,7 +8,7 @@ the set of entities or one of their physical properties changes.
 """
 from __future__ import annotations
 
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import torch
 from torch import Tensor
@@ -29,6 +29,7 @@ from vmas_ros.simulator.utils import (
     LINEAR_FRICTION,
     TORQUE_CONSTRAINT_FORCE,
 )
+from vmas_ros.simulator.world_rays import RayQueries
 
 __all__ = ["World"]
 
@@ -42,7 +43,7 @@ def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) 
 _EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
 
 
-class World:
+class World(RayQueries):
     """A batch of ``batch_dim`` 2D worlds sharing the same entities (VMAS ``World``)."""
 
     def __init__(
@@ -465,56 +466,3 @@ class World:
             touching = torch.linalg.vector_norm(sphere.state.pos - closest, dim=-1) < sphere.shape.radius + LINE_MIN_DIST
             return self._pick(inside | touching, env_index)
         return self.get_distance(entity_a, entity_b, env_index) < 0
-
-    def cast_ray(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
-        """Distance [B] along one ray per env from ``entity`` to the nearest filtered entity."""
-        return self.cast_rays(entity, angles.unsqueeze(-1), max_range, entity_filter).squeeze(-1)
-
-    def ray_targets(self, entity: Entity, entity_filter: Callable[[Entity], bool]) -> List[Entity]:
-        """The entities rays from ``entity`` can hit (``entity_filter`` true, not itself); all must collide with it."""
-        targets = [e for e in self.entities if e is not entity and entity_filter(e)]
-        for e in targets:
-            if not (e.collides(entity) and entity.collides(e)):
-                raise ValueError(f"rays are cast only among collidable entities: {entity.name!r} and {e.name!r} do not collide")
-        return targets
-
-    def cast_rays(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
-        """Distances [B, R] along rays at world ``angles`` [B, R]; ``max_range`` where nothing is hit."""
-        return self.cast_rays_along(entity, torch.cos(angles), torch.sin(angles), max_range, entity_filter)
-
-    def cast_rays_along(
-        self, entity: Entity, cos_a: Tensor, sin_a: Tensor, max_range: float,
-        entity_filter: Callable[[Entity], bool] = lambda _: False,
-    ) -> Tensor:
-        """:meth:`cast_rays` for rays given by their direction ``(cos, sin)``, each ``[B, R]``.
-
-        For sensors that know their directions more cheaply than by two
-        transcendental passes over ``[B, R]`` (see ``Lidar.ray_directions``).
-        """
-        targets = self.ray_targets(entity, entity_filter)
-        # rays [1, B, R] against targets [E, B, 1]: every op runs over contiguous [B, R] blocks
-        # and the nearest hit is a reduction over the leading dim
-        origin = entity.state.pos
-        ox, oy = origin[:, 0].view(1, -1, 1), origin[:, 1].view(1, -1, 1)
-        nearest = torch.full_like(cos_a, float(max_range))
-        cos_a, sin_a = cos_a.unsqueeze(0), sin_a.unsqueeze(0)
-        for kind in ("box", "sphere", "line"):
-            group = [e for e in targets if e.shape.kind == kind]
-            if not group:
-                continue
-            pos = torch.stack([e.state.pos for e in group])  # [E, B, 2]
-            cx, cy = pos[..., 0:1], pos[..., 1:2]
-            if kind == "sphere":
-                radius = torch.tensor([e.shape.radius for e in group], device=self._device).view(-1, 1, 1)
-                d = self._ray_kernels["sphere"](ox, oy, cos_a, sin_a, cx, cy, radius, max_range)
-            else:
-                rot = torch.stack([e.state.rot for e in group])  # [E, B, 1]
-                cos_r, sin_r = torch.cos(rot), torch.sin(rot)
-                length = torch.tensor([e.shape.length for e in group], device=self._device).view(-1, 1, 1)
-                if kind == "box":
-                    width = torch.tensor([e.shape.width for e in group], device=self._device).view(-1, 1, 1)
-                    d = self._ray_kernels["box"](ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, width, max_range)
-                else:
-                    d = self._ray_kernels["line"](ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, length, max_range)
-            nearest = torch.minimum(nearest, d.amin(dim=0))
-        return nearest
