@@ -18,22 +18,15 @@ import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 from rclpy.serialization import serialize_message
-from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 
+from test.record.bag_helpers import _pose_bytes
 from vmas_ros.record import McapRecorder
 from vmas_ros.record.recover_cli import default_output, main
 
 REPO = Path(__file__).resolve().parents[2]
 MS = 1_000_000
 CHUNK = 4096
-
-
-def _pose(i: int) -> bytes:
-    msg = PoseStamped()
-    msg.header.frame_id = "world"
-    msg.pose.position.x = float(i)
-    return serialize_message(msg)
 
 
 def _clock(i: int) -> bytes:
@@ -47,7 +40,7 @@ def _killed_bag(tmp_path: Path, steps: int = 400) -> Path:
     live, killed = tmp_path / "live.mcap", tmp_path / "killed.mcap"
     recorder = McapRecorder(live, chunk_size=CHUNK)
     for i in range(steps):
-        recorder.write("/pose", "geometry_msgs/msg/PoseStamped", None, i * MS, serialized=_pose(i))
+        recorder.write("/pose", "geometry_msgs/msg/PoseStamped", None, i * MS, serialized=_pose_bytes(i))
         recorder.write("/clock", "rosgraph_msgs/msg/Clock", None, i * MS, serialized=_clock(i))
     shutil.copyfile(live, killed)  # the open chunk is only in the recorder's memory
     recorder.close()
@@ -77,7 +70,7 @@ def test_recovers_all_finished_chunks_and_reports_per_topic(tmp_path, capsys):
     # a prefix of what was written, both topics in step, and at most one chunk lost
     assert topics["/pose"] == [i * MS for i in range(len(topics["/pose"]))]
     assert abs(len(topics["/pose"]) - len(topics["/clock"])) <= 1
-    per_step = len(_pose(0)) + len(_clock(0)) + 2 * 31  # message records of one step
+    per_step = len(_pose_bytes(0)) + len(_clock(0)) + 2 * 31  # message records of one step
     assert len(topics["/pose"]) >= 400 - CHUNK / per_step - 1
     assert report["first_log_time_ns"] == 0 and report["last_log_time_ns"] == max(topics["/pose"][-1], topics["/clock"][-1])
 
@@ -100,7 +93,7 @@ def test_complete_input_loses_nothing(tmp_path, capsys):
     path = tmp_path / "whole.mcap"
     with McapRecorder(path, chunk_size=CHUNK) as recorder:
         for i in range(50):
-            recorder.write("/pose", "geometry_msgs/msg/PoseStamped", None, i * MS, serialized=_pose(i))
+            recorder.write("/pose", "geometry_msgs/msg/PoseStamped", None, i * MS, serialized=_pose_bytes(i))
     assert main([str(path), str(tmp_path / "copy.mcap")]) == 0
     assert "the input was complete" in capsys.readouterr().out
     assert _read(tmp_path / "copy.mcap") == _read(path)
