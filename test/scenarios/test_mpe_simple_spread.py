@@ -14,9 +14,10 @@ from vmas_ros.scenarios.mpe import simple_spread
 BATCH = 2 * simple_spread.FEW_ENVS
 
 
-@pytest.mark.parametrize("n_agents", [3, 5])
-def test_many_envs_path_equals_few_envs_path(n_agents, device, monkeypatch):
-    env = vmas_ros.make_env("simple_spread", num_envs=BATCH, device=device, seed=3, n_agents=n_agents)
+@pytest.mark.parametrize("n_agents,obs_agents", [(3, True), (5, True), (1, True), (4, False)])
+def test_many_envs_path_equals_few_envs_path(n_agents, obs_agents, device, monkeypatch):
+    env = vmas_ros.make_env("simple_spread", num_envs=BATCH, device=device, seed=3, n_agents=n_agents,
+                            obs_agents=obs_agents)
     env.reset()
     gen = torch.Generator().manual_seed(4)
     # crowd the agents so that some overlap (the reward's collision term) in some envs
@@ -30,5 +31,18 @@ def test_many_envs_path_equals_few_envs_path(n_agents, device, monkeypatch):
     few_rew, few_obs = scenario._reward_few_envs(), scenario._observations()
     assert torch.equal(many_obs, few_obs)
     torch.testing.assert_close(many_rew, few_rew, atol=1e-5, rtol=0)
+    if n_agents == 1:
+        return
     spacing = torch.cdist(torch.stack([a.state.pos for a in env.agents], 1), torch.stack([a.state.pos for a in env.agents], 1))
     assert ((spacing < 0.3).sum(dim=(1, 2)) > n_agents).any(), "some envs must have overlapping agents"
+
+
+def test_many_envs_observations_carry_gradients(device):
+    """With grad enabled the observations are written through autograd-visible copies (out= refuses them)."""
+    env = vmas_ros.make_env("simple_spread", num_envs=BATCH, device=device, seed=5, grad_enabled=True)
+    env.reset()
+    start = env.agents[1].state.pos.clone().requires_grad_(True)
+    env.agents[1].set_pos(start, batch_index=None)
+    observations = env.scenario._observations()
+    observations[0].sum().backward()  # agent 0 sees agent 1 relative to itself: d/d(start) = 1 per coordinate
+    assert torch.equal(start.grad, torch.ones_like(start))

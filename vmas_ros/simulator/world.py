@@ -260,19 +260,30 @@ class World(RayQueries):
             fixed_rotation = self._joint_fixed_rotations(tables)
         params = self._step_params()
         physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
-        new = self._physics_step(state, tables, params, physics.stack_actions(force, torque), fixed_rotation,
+        actions = physics.stack_actions(force, torque)
+        del force, torque  # [N, B, 2] and [N, B, 1] copies of ``actions``: freed before the physics allocates
+        new = self._physics_step(state, tables, params, actions, fixed_rotation,
                                   actions_writable=True)  # a fresh stack, ours to add into
+        del actions
+        # the old state is not needed any more: drop the caches that hold it before the new
+        # stacks are built, and swap one field at a time, so that at 30,000 envs the old and
+        # new copies of a field (not of the whole state) are alive at once
+        del state
+        self._planar, self._xy_splits = {}, {}
         q, v = new.q, new.v
-        stacks = {"pos": join_xy(q[0], q[1]), "vel": join_xy(v[0], v[1]), "rot": q[2].unsqueeze(-1),
-                  "ang_vel": v[2].unsqueeze(-1)}
-        views = {name: stack.unbind(0) for name, stack in stacks.items()}
-        for e, pos, vel, rot, ang_vel in zip(entities, views["pos"], views["vel"], views["rot"], views["ang_vel"]):
-            s = e.state
-            s._pos, s._vel, s._rot, s._ang_vel = pos, vel, rot, ang_vel
-        # the stacks of the new state exist already: hand them to stacked_state for free, and keep
-        # the planar state for the next step (both dropped once an entity's tensor changes)
-        for name, parts in views.items():
-            self._stacks[name] = (list(parts), [t._version for t in parts], stacks[name])
+        builders = (("pos", lambda: join_xy(q[0], q[1])), ("vel", lambda: join_xy(v[0], v[1])),
+                    ("rot", lambda: q[2].unsqueeze(-1)), ("ang_vel", lambda: v[2].unsqueeze(-1)))
+        views = {}
+        for name, build in builders:
+            self._stacks.pop(name, None)
+            stack = build()
+            parts = views[name] = stack.unbind(0)
+            attribute = "_" + name
+            for e, part in zip(entities, parts):
+                setattr(e.state, attribute, part)
+            # the stack exists already: hand it to stacked_state for free
+            self._stacks[name] = (list(parts), [t._version for t in parts], stack)
+        # keep the planar state for the next step (dropped once an entity's tensor changes)
         self._planar = {
             "q": ([*views["pos"], *views["rot"]], [t._version for t in views["pos"] + views["rot"]], q),
             "v": ([*views["vel"], *views["ang_vel"]], [t._version for t in views["vel"] + views["ang_vel"]], v),

@@ -57,7 +57,7 @@ class Scenario(BaseScenario):
             list(range(n_landmarks)) + ([n_landmarks + j for j in range(n_agents) if j != i] if self.obs_agents else [])
             for i in range(n_agents)
         ]
-        self._seen_rows_on: dict = {}  # device -> [A, R] index tensor
+        self._seen_rows_on: dict = {}  # (which rows, device) -> [A, R] index tensor
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._obs_cache = None  # (pos stack, vel stack, observations) of the last state observed
         self._overlap = None  # see _overlap_thresholds
@@ -120,6 +120,14 @@ class Scenario(BaseScenario):
             self._obs_cache = None
         return observation
 
+    def _gathered_rows(self, pos: torch.Tensor, rows: list, key: str = "all") -> torch.Tensor:
+        """``pos[rows]`` as ``[A, R, B, 2]`` for a per-agent list of R rows (index tensors cached per device)."""
+        index = self._seen_rows_on.get((key, pos.device))
+        if index is None:
+            index = self._seen_rows_on[(key, pos.device)] = torch.tensor(rows, device=pos.device)
+        # index_select of the flat rows: ~5x faster than advanced indexing on the CPU
+        return torch.index_select(pos, 0, index.flatten()).view(*index.shape, *pos.shape[1:])
+
     def _observations(self) -> torch.Tensor:
         """Every agent's observation [A, B, obs], computed once per state.
 
@@ -131,26 +139,39 @@ class Scenario(BaseScenario):
         cached = self._obs_cache
         if cached is not None and cached[0] is pos and cached[1] is vel:
             return cached[2]
-        rows = self._seen_rows_on.get(pos.device)
-        if rows is None:
-            rows = self._seen_rows_on[pos.device] = torch.tensor(self._seen_rows, device=pos.device)
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
-        # index_select of the flat rows: ~5x faster than advanced indexing on the CPU
-        relative = torch.index_select(pos, 0, rows.flatten()).view(*rows.shape, *pos.shape[1:]).sub_(own_pos.unsqueeze(1))
-        n_agents, n_rows = rows.shape
         if pos.shape[1] < FEW_ENVS:  # fewer calls
+            relative = self._gathered_rows(pos, self._seen_rows).sub_(own_pos.unsqueeze(1))  # [A, R, B, 2]
             observations = torch.cat([own_pos, own_vel, relative.permute(0, 2, 1, 3).flatten(2)], dim=-1)
         else:
-            # lay out [A, B, (own pos, own vel, R relative), 2] moving whole (x, y) pairs (see layout.as_pairs)
-            observations = pos.new_empty(n_agents, pos.shape[1], n_rows + 2, 2)
-            pairs = as_pairs(observations)
-            pairs[:, :, 0] = as_pairs(own_pos)
+            # lay out [A, B, (own pos, own vel, landmarks, other agents), 2] moving whole (x, y)
+            # pairs (see layout.as_pairs); each relative position is subtracted straight into its
+            # slot, so the only temporary is the other agents' gathered rows (the landmarks are
+            # the same rows for every agent: a broadcast view, no copy)
+            n_agents, batch = own_pos.shape[:2]
+            n_rows = len(self._seen_rows[0])
+            observations = pos.new_empty(n_agents, batch, n_rows + 2, 2)
+            pairs, own = as_pairs(observations), as_pairs(own_pos).unsqueeze(2)  # [A, B, R + 2], [A, B, 1]
+            pairs[:, :, 0] = own[:, :, 0]
             pairs[:, :, 1] = as_pairs(own_vel)
-            pairs[:, :, 2:] = as_pairs(relative).transpose(1, 2)
+            landmarks = as_pairs(pos[:n_landmarks]).t().unsqueeze(0).expand(n_agents, batch, n_landmarks)
+            _subtract_into(pairs[:, :, 2:2 + n_landmarks], landmarks, own)
+            if n_rows > n_landmarks:
+                others = [row[n_landmarks:] for row in self._seen_rows]
+                gathered = as_pairs(self._gathered_rows(pos, others, key="others"))  # [A, A - 1, B]
+                _subtract_into(pairs[:, :, 2 + n_landmarks:], gathered.transpose(1, 2), own)
             observations = observations.flatten(2)
         self._obs_cache = (pos, vel, observations)
         return observations
+
+
+def _subtract_into(destination: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> None:
+    """``destination[...] = a - b`` in one pass (``out=``), or through a copy when autograd must see it."""
+    if torch.is_grad_enabled() and (a.requires_grad or b.requires_grad):
+        destination.copy_(a - b)  # out= refuses tensors that require grad
+    else:
+        torch.sub(a, b, out=destination)
 
 
 def _squared_gaps(ax: torch.Tensor, ay: torch.Tensor, bx: torch.Tensor, by: torch.Tensor) -> torch.Tensor:
