@@ -195,11 +195,26 @@ class Environment:
             raise ValueError(f"expected actions for {self.n_agents} agents, got {len(actions)}")
         return list(actions)
 
+    def _action_plans(self) -> list:
+        """Per policy agent, what turning its action into ``action.u``/``c`` involves; fixed for the env's life.
+
+        (action width, physical size, message width, multiplier is one, noise is added): computed once
+        because each is a few Python calls per agent and step otherwise.
+        """
+        plans = self.__dict__.get("_plans")
+        if plans is None:
+            plans = self._plans = [
+                (self.get_agent_action_size(agent), agent.action_size,
+                 self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0,
+                 _is_one(agent.action.u_multiplier), _has_noise(agent.action.u_noise))
+                for agent in self.agents
+            ]
+        return plans
+
     def _set_actions(self, actions: list) -> None:
         tensors, names = [], []
-        for agent, action in zip(self.agents, actions):
-            size = self.get_agent_action_size(agent)
-            action = act.to_action_tensor(action, agent.name, self.num_envs, size, self.device, self.continuous_actions)
+        for agent, action, plan in zip(self.agents, actions, self._action_plans()):
+            action = act.to_action_tensor(action, agent.name, self.num_envs, plan[0], self.device, self.continuous_actions)
             if not self.grad_enabled:
                 action = action.detach()
             tensors.append(action)
@@ -234,8 +249,8 @@ class Environment:
             tensors = [torch.maximum(torch.minimum(a.float(), high), low) for a, low, high in zip(tensors, lows, highs)]
         else:
             act.check_finite_and_range(tensors, lows, highs, names, kind)
-        for agent, action in zip(self.agents, tensors):
-            self._apply_action(agent, action)
+        for agent, action, plan in zip(self.agents, tensors, self._action_plans()):
+            self._apply_action(agent, action, plan)
 
     def _stacked_bound_tensors(self):
         """[A, 1, D] low and high of all agents' bounds, and the same as [A, D] (same-shape actions only)."""
@@ -267,9 +282,8 @@ class Environment:
             return torch.zeros(len(space.nvec), device=self.device), torch.tensor(space.nvec - 1, device=self.device, dtype=torch.float32)
         return torch.zeros(1, device=self.device), torch.tensor([space.n - 1], device=self.device, dtype=torch.float32)
 
-    def _apply_action(self, agent, action: Tensor) -> None:
-        comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
-        size = agent.action_size
+    def _apply_action(self, agent, action: Tensor, plan: tuple) -> None:
+        _, size, comm, multiplier_is_one, noisy = plan
         if self.continuous_actions:
             u = action if action.shape[1] == size else action[:, :size]
             c = action[:, size:] if comm else None
@@ -284,11 +298,11 @@ class Environment:
             c = None
             if comm:
                 c = torch.nn.functional.one_hot(choices[:, size], comm).float()
-        if not _is_one(agent.action.u_multiplier):
+        if not multiplier_is_one:
             u = u * agent.action.u_multiplier_tensor
-        if _has_noise(agent.action.u_noise):
+        if noisy:
             u = u + torch.randn_like(u) * agent.action.u_noise_tensor
-        agent.action.u = u
+        agent.action._u = u  # checked above: [num_envs, size] on the env's device
         if comm:
             if agent.c_noise > 0:
                 c = c + torch.randn_like(c) * agent.c_noise

@@ -176,10 +176,9 @@ def sphere_pair_forces(pair: PairTable, xy: Tensor, params, exact: bool = False)
     No broad-phase gate: for two spheres the broad phase's reach is the sum of
     the radii, the contact distance itself, so every active contact passes it.
     """
-    d = torch.index_select(xy, 1, pair.index_a) - torch.index_select(xy, 1, pair.index_b)
-    p = pair.params
-    dist_min = p["a_radius"] + p["b_radius"]
     margin = params.contact_margin
+    d = torch.index_select(xy, 1, pair.index_a) - torch.index_select(xy, 1, pair.index_b)
+    dist_min = pair.contact_distance
     if exact:
         dist = norm(d[0], d[1])
         penetration = torch.logaddexp(_zero(dist), (dist_min - dist) / margin) * margin

@@ -159,9 +159,12 @@ class Entity(_Batched, Observable):
         self._state.zero_grad()
 
     def to(self, device) -> None:
-        """Move the entity's state and action tensors to ``device``."""
+        """Move the entity's state and action tensors to ``device`` (in a world: after ``World.to`` released them)."""
         self.device = device
-        for part in self._batched_parts():
+        self._state.device = device
+        for name, value in self._state.tensors().items():
+            self._state._assign(name, value.to(device))
+        for part in self._batched_parts()[1:]:
             part.device = device
             for key, value in list(vars(part).items()):
                 if isinstance(value, Tensor):

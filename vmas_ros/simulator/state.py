@@ -4,14 +4,19 @@
 (``pos`` is [batch, 2]); ``Action`` holds an agent's physical action ``u`` and
 message ``c`` for the current step. Setters validate shape and device, so a
 wrong tensor fails where it is written, not deep inside a step.
+
+After a step, pos/vel/rot/ang_vel live in the world's
+:class:`~vmas_ros.simulator.state_store.StateStore`; an entity fetches a
+field from there the first time it is read (see that module for why).
 """
 from __future__ import annotations
 
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.state_store import DETACHED, STORED_FIELDS, StateStore
 from vmas_ros.simulator.utils import TorchUtils
 
 __all__ = ["EntityState", "AgentState", "Action"]
@@ -73,41 +78,101 @@ def _state_tensor(name: str, width: int, doc: str):
     return property(fget, fset, doc=doc)
 
 
+def _stored_tensor(name: str, width: int, doc: str):
+    """A [batch, width] field kept in the world's state store after a step (validated like _state_tensor).
+
+    The getter fetches the field from the store when the store has stepped
+    since the entity last held it (generation numbers); the setter keeps the
+    new tensor on the entity and tells the store that it is no longer the truth.
+    """
+    attr, gen_attr = "_" + name, "_" + name + "_gen"
+
+    def fget(self):
+        store = self._store
+        if self.__dict__[gen_attr] != store.gen:
+            self.__dict__[attr] = store.part(name, self._slot)
+            self.__dict__[gen_attr] = store.gen
+        return self.__dict__[attr]
+
+    def fset(self, value: Tensor) -> None:
+        value = self._check_tensor(self._owner_name, name, value)
+        if value.dim() != 2 or value.shape[1] != width:
+            raise ValueError(
+                f"{self._owner_name}.{name} must have shape [{self._batch_dim}, {width}], "
+                f"got {tuple(value.shape)}"
+            )
+        self._own(name, value)
+
+    return property(fget, fset, doc=doc)
+
+
 class EntityState(_Batched):
     """Batched kinematic state of one entity across all envs."""
 
-    pos = _state_tensor("pos", 2, "position [batch, 2] in the world frame")
-    vel = _state_tensor("vel", 2, "velocity [batch, 2] in the world frame")
-    rot = _state_tensor("rot", 1, "heading [batch, 1], radians, counter-clockwise")
-    ang_vel = _state_tensor("ang_vel", 1, "angular velocity [batch, 1], rad/s")
+    pos = _stored_tensor("pos", 2, "position [batch, 2] in the world frame")
+    vel = _stored_tensor("vel", 2, "velocity [batch, 2] in the world frame")
+    rot = _stored_tensor("rot", 1, "heading [batch, 1], radians, counter-clockwise")
+    ang_vel = _stored_tensor("ang_vel", 1, "angular velocity [batch, 1], rad/s")
 
-    _fields = ("pos", "vel", "rot", "ang_vel")
+    _fields = STORED_FIELDS
 
     def __init__(self, owner_name: str = "entity") -> None:
         super().__init__()
         self._owner_name = owner_name
-        self._pos = self._vel = self._rot = self._ang_vel = None
+        #: the world's state store and this entity's row in it (set by World when the entity list changes)
+        self._store: StateStore = DETACHED
+        self._slot = -1
+        for name in STORED_FIELDS:
+            self.__dict__["_" + name] = None
+            self.__dict__["_" + name + "_gen"] = DETACHED.gen
+
+    def _own(self, name: str, value: Optional[Tensor]) -> None:
+        """Make ``value`` this entity's ``name`` until the next step; the store no longer holds it."""
+        store = self._store
+        self.__dict__["_" + name] = value
+        self.__dict__["_" + name + "_gen"] = store.gen
+        store.dirty = True
+
+    def _join(self, store: StateStore, slot: int) -> None:
+        """Read from ``store`` at row ``slot`` from now on (the caller released the previous store)."""
+        for name in STORED_FIELDS:
+            getattr(self, name)  # take any stale field from the old store first
+            self.__dict__["_" + name + "_gen"] = store.gen
+        self._store, self._slot = store, slot
+        store.dirty = True
 
     def _spawn(self, dim_c: int, dim_p: int) -> None:
         zeros = lambda width: torch.zeros(self._batch_dim, width, device=self._device)  # noqa: E731
-        self._pos, self._vel = zeros(dim_p), zeros(dim_p)
-        self._rot, self._ang_vel = zeros(1), zeros(1)
+        for name, width in (("pos", dim_p), ("vel", dim_p), ("rot", 1), ("ang_vel", 1)):
+            self._own(name, zeros(width))
+
+    def _assign(self, name: str, value: Tensor) -> None:
+        """Set a field without validation (internal: resets, device moves, detaching)."""
+        if name in STORED_FIELDS:
+            self._own(name, value)
+        else:
+            setattr(self, "_" + name, value)
 
     def _reset(self, env_index) -> None:
         for name in self._fields:
-            value = getattr(self, "_" + name)
+            value = getattr(self, name)
             if value is None:
                 continue
             if env_index is None:
-                setattr(self, "_" + name, torch.zeros_like(value))
+                self._assign(name, torch.zeros_like(value))
             else:
-                setattr(self, "_" + name, TorchUtils.where_from_index(env_index, 0.0, value))
+                self._assign(name, TorchUtils.where_from_index(env_index, 0.0, value))
 
     def zero_grad(self) -> None:
         for name in self._fields:
-            value = getattr(self, "_" + name)
+            value = getattr(self, name)
             if value is not None:
-                setattr(self, "_" + name, value.detach())
+                self._assign(name, value.detach())
+
+    def tensors(self) -> Dict[str, Tensor]:
+        """Every batched tensor this state holds, by field name (for device moves)."""
+        values = {name: getattr(self, name) for name in self._fields}
+        return {name: value for name, value in values.items() if isinstance(value, Tensor)}
 
 
 class AgentState(EntityState):

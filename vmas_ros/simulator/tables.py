@@ -45,6 +45,11 @@ class PairTable:
         """[2P] indices a0, b0, a1, b1, ... for scattering both sides in pair order."""
         return torch.stack([self.index_a, self.index_b], dim=1).flatten()
 
+    @cached_property
+    def contact_distance(self) -> Tensor:
+        """[P, 1] sum of the two radii (sphere pairs): centres closer than this touch."""
+        return self.params["a_radius"] + self.params["b_radius"]
+
     @property
     def size(self) -> int:
         return int(self.index_a.numel())

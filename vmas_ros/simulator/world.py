@@ -1,10 +1,12 @@
 """The world: owns the entities of a batch of envs and steps them together.
 
-Public API follows VMAS 1.5's ``World``. Internally a step gathers every
-entity's state into ``[n_entities, batch, ...]`` tensors (one ``stack`` per
-quantity), runs :func:`vmas_ros.simulator.physics.step`, and hands each
-entity a view of the result. Property tables are cached and rebuilt only when
-the set of entities or one of their physical properties changes.
+Public API follows VMAS 1.5's ``World``. Internally a step runs
+:func:`vmas_ros.simulator.physics.step_planar` on the planar state of all
+entities, which the world's :class:`~vmas_ros.simulator.state_store.StateStore`
+keeps between steps; entities read their fields from it lazily, and the
+state is rebuilt from the entities only when one of them changed. Property
+tables are cached and rebuilt only when the set of entities or one of their
+physical properties changes.
 """
 from __future__ import annotations
 
@@ -17,8 +19,9 @@ from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
-from vmas_ros.simulator.layout import join_xy, split_xy_stacked
+from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.shapes import Box, Line, Sphere
+from vmas_ros.simulator.state_store import StateStore
 from vmas_ros.simulator.tables import WorldTables, build_tables
 from vmas_ros.simulator.utils import (
     ANGULAR_FRICTION,
@@ -92,11 +95,11 @@ class World(RayQueries):
         self._landmarks: List[Landmark] = []
         self._joint_constraints: Dict[frozenset, object] = {}
         self._tables: Optional[WorldTables] = None
-        #: field -> (the entity tensors it was stacked from, their versions, the stack)
+        #: every entity's pos/vel/rot/ang_vel after the last step (see state_store.py)
+        self._store = StateStore()
+        #: while the store is dirty: field -> (the entity tensors it was stacked from, their versions, the stack)
         self._stacks: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
         self._xy_splits: Dict[str, Tuple[Tensor, Tensor]] = {}  # field -> (stack it was split from, [2, N, B])
-        #: "q"/"v" -> (entity tensors, their versions, [3, N, B] planar state) of the last step's output
-        self._planar: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
         #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
@@ -149,13 +152,21 @@ class World(RayQueries):
         """Only way to add an agent; ``entities`` lists landmarks first, then agents (as VMAS)."""
         self._check_new_name(agent)
         agent._attach(self)
+        self._store.release([e.state for e in self.entities])  # rows move: entities own their state again
         self._agents.append(agent)
-        self._invalidate_tables()
+        self._entities_changed()
 
     def add_landmark(self, landmark: Landmark) -> None:
         self._check_new_name(landmark)
         landmark._attach(self)
+        self._store.release([e.state for e in self.entities])
         self._landmarks.append(landmark)
+        self._entities_changed()
+
+    def _entities_changed(self) -> None:
+        """Give every entity its row in the state store and rebuild the tables."""
+        for slot, entity in enumerate(self.entities):
+            entity.state._join(self._store, slot)
         self._invalidate_tables()
 
     def add_joint(self, joint) -> None:
@@ -194,6 +205,8 @@ class World(RayQueries):
     def to(self, device) -> None:
         self._device = torch.device(device)
         self._gravity = self._gravity.to(self._device)
+        self._store.release([e.state for e in self.entities])
+        self._stacks, self._xy_splits = {}, {}
         for e in self.entities:
             e.to(self._device)
         self._invalidate_tables()
@@ -253,58 +266,32 @@ class World(RayQueries):
         entities = self.entities
         if not entities:
             return
-        state = self._planar_state(entities)
-        force, torque = self._action_forces(tables, state.q[0])
+        store = self._store
+        state = physics.PlanarState(*store.planar()) if store.clean() else self._planar_from_entities(entities)
+        actions = self._action_stack(tables, state.q)
         fixed_rotation = None
         if tables.joints is not None:
             fixed_rotation = self._joint_fixed_rotations(tables)
         params = self._step_params()
         physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
-        actions = physics.stack_actions(force, torque)
-        del force, torque  # [N, B, 2] and [N, B, 1] copies of ``actions``: freed before the physics allocates
         new = self._physics_step(state, tables, params, actions, fixed_rotation,
                                   actions_writable=True)  # a fresh stack, ours to add into
-        del actions
-        # the old state is not needed any more: drop the caches that hold it before the new
-        # stacks are built, and swap one field at a time, so that at 30,000 envs the old and
-        # new copies of a field (not of the whole state) are alive at once
-        del state
-        self._planar, self._xy_splits = {}, {}
-        q, v = new.q, new.v
-        builders = (("pos", lambda: join_xy(q[0], q[1])), ("vel", lambda: join_xy(v[0], v[1])),
-                    ("rot", lambda: q[2].unsqueeze(-1)), ("ang_vel", lambda: v[2].unsqueeze(-1)))
-        views = {}
-        for name, build in builders:
-            self._stacks.pop(name, None)
-            stack = build()
-            parts = views[name] = stack.unbind(0)
-            attribute = "_" + name
-            for e, part in zip(entities, parts):
-                setattr(e.state, attribute, part)
-            # the stack exists already: hand it to stacked_state for free
-            self._stacks[name] = (list(parts), [t._version for t in parts], stack)
-        # keep the planar state for the next step (dropped once an entity's tensor changes)
-        self._planar = {
-            "q": ([*views["pos"], *views["rot"]], [t._version for t in views["pos"] + views["rot"]], q),
-            "v": ([*views["vel"], *views["ang_vel"]], [t._version for t in views["vel"] + views["ang_vel"]], v),
-        }
+        del actions, state
+        # the step's output becomes every entity's state: entities fetch their views when read
+        self._stacks, self._xy_splits = {}, {}
+        store.adopt(new.q, new.v)
         if self._dim_c > 0:
             for agent in self._agents:
                 if not agent.silent and agent.action.c is not None:
                     agent.state._c = agent.action.c
 
-    def _planar_state(self, entities: List[Entity]) -> physics.PlanarState:
-        """The physics state, ``[3, N, B]`` each: last step's output unless some entity's state changed since."""
+    def _planar_from_entities(self, entities: List[Entity]) -> physics.PlanarState:
+        """The physics state ``[3, N, B]`` (q and v) stacked from the entities' own tensors."""
+        n = len(entities)
         out = []
-        for key, (lin, ang) in (("q", ("pos", "rot")), ("v", ("vel", "ang_vel"))):
-            current = [getattr(e.state, lin) for e in entities] + [getattr(e.state, ang) for e in entities]
-            cached = self._planar.get(key)
-            if cached is not None and _unchanged(cached[0], cached[1], current):
-                out.append(cached[2])
-            else:
-                n = len(entities)
-                linear = split_xy_stacked(torch.stack(current[:n]))
-                out.append(torch.cat([linear, torch.stack(current[n:])[..., 0].unsqueeze(0)]))
+        for lin, ang in (("pos", "rot"), ("vel", "ang_vel")):
+            linear = split_xy_stacked(torch.stack([getattr(e.state, lin) for e in entities]))
+            out.append(torch.cat([linear, torch.stack([getattr(e.state, ang) for e in entities])[..., 0].unsqueeze(0)]))
         return physics.PlanarState(*out)
 
     def stacked_state(self, field: str = "pos") -> Tensor:
@@ -318,6 +305,8 @@ class World(RayQueries):
         as read-only: it shares memory with the entities' states.
         Agents are the last ``len(agents)`` rows (``entities`` is landmarks then agents).
         """
+        if self._store.clean():
+            return self._store.stack(field)
         current = [getattr(e.state, field) for e in self.entities]
         cached = self._stacks.get(field)
         if cached is not None:
@@ -337,19 +326,34 @@ class World(RayQueries):
         rows of the physics state itself (no copy); otherwise they are split
         from :meth:`stacked_state`. Read-only, like :meth:`stacked_state`.
         """
-        key = {"pos": "q", "vel": "v"}.get(field)
-        if key is None:
+        if field not in ("pos", "vel"):
             raise ValueError(f"stacked_xy: field must be 'pos' or 'vel', got {field!r}")
-        cached = self._planar.get(key)
-        if cached is not None:
-            n = len(self.entities)
-            if _unchanged(cached[0][:n], cached[1][:n], [getattr(e.state, field) for e in self.entities]):
-                return cached[2][0], cached[2][1]
+        if self._store.clean():
+            planar = self._store.planar()[0 if field == "pos" else 1]
+            return planar[0], planar[1]
         stack = self.stacked_state(field)
         split = self._xy_splits.get(field)
         if split is None or split[0] is not stack:
             split = self._xy_splits[field] = (stack, split_xy_stacked(stack.contiguous()))
         return split[1][0], split[1][1]
+
+    def _action_stack(self, tables: WorldTables, q: Tensor) -> Tensor:
+        """The step's action input ``[3, N, B]`` (fx, fy, torque per entity, zero for landmarks; see physics.stack_actions).
+
+        A fresh tensor: the physics adds contact forces into it.
+        """
+        n_agents = tables.n_agents
+        if n_agents and q.numel() <= physics.SMALL_BATCH_ELEMENTS:
+            # few elements: each call's fixed cost dominates, so write the agents' rows into zeros
+            # through strided views (five calls, where the large-batch layout below takes a dozen)
+            agent_force, agent_torque = self._agent_actions(tables)
+            actions = q.new_zeros(q.shape)
+            rows = actions[:, tables.n_entities - n_agents:]
+            rows[:2].copy_(agent_force.permute(2, 0, 1))
+            rows[2].copy_(agent_torque[..., 0])
+            return actions
+        force, torque = self._action_forces(tables, q[0])
+        return physics.stack_actions(force, torque)
 
     def _action_forces(self, tables: WorldTables, like: Tensor) -> Tuple[Tensor, Tensor]:
         """Agents' clamped action forces [N, B, 2] and torques [N, B, 1], zero for landmarks (``like``: [N, B])."""
@@ -357,13 +361,23 @@ class World(RayQueries):
         if n_agents == 0:
             return like.new_zeros(*like.shape, 2), like.new_zeros(*like.shape, 1)
         n_landmarks = tables.n_entities - n_agents
+        if not (tables.limits_force or tables.limits_torque or self._fixed_agents(tables)):
+            # the common case: one stack per field, landmarks' rows from a cached zero block
+            zero_f, zero_t = self._zero_rows(like)
+            return (torch.stack([zero_f] * n_landmarks + [a.state._force for a in self._agents]),
+                    torch.stack([zero_t] * n_landmarks + [a.state._torque for a in self._agents]))
+        agent_force, agent_torque = self._agent_actions(tables)
+        if n_landmarks == 0:
+            return agent_force, agent_torque
+        force = torch.cat([agent_force.new_zeros((n_landmarks, *agent_force.shape[1:])), agent_force])
+        torque = torch.cat([agent_torque.new_zeros((n_landmarks, *agent_torque.shape[1:])), agent_torque])
+        return force, torque
+
+    def _agent_actions(self, tables: WorldTables) -> Tuple[Tensor, Tensor]:
+        """Agents' action forces [A, B, 2] and torques [A, B, 1], clamped to their limits as VMAS does."""
         forces = [a.state._force for a in self._agents]
         torques = [a.state._torque for a in self._agents]
         fixed = self._fixed_agents(tables)
-        if not (tables.limits_force or tables.limits_torque or fixed):
-            # the common case: one stack per field, landmarks' rows from a cached zero block
-            zero_f, zero_t = self._zero_rows(like)
-            return (torch.stack([zero_f] * n_landmarks + forces), torch.stack([zero_t] * n_landmarks + torques))
         agent_force, agent_torque = torch.stack(forces), torch.stack(torques)
         if tables.limits_force:
             agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
@@ -381,11 +395,7 @@ class World(RayQueries):
         if fixed:
             agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
             agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
-        if n_landmarks == 0:
-            return agent_force, agent_torque
-        force = torch.cat([agent_force.new_zeros((n_landmarks, *agent_force.shape[1:])), agent_force])
-        torque = torch.cat([agent_torque.new_zeros((n_landmarks, *agent_torque.shape[1:])), agent_torque])
-        return force, torque
+        return agent_force, agent_torque
 
     def _fixed_agents(self, tables: WorldTables) -> bool:
         """Whether some agent cannot move or rotate (its action force or torque is then ignored)."""

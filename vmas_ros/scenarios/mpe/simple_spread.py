@@ -57,9 +57,12 @@ class Scenario(BaseScenario):
             list(range(n_landmarks)) + ([n_landmarks + j for j in range(n_agents) if j != i] if self.obs_agents else [])
             for i in range(n_agents)
         ]
+        #: the same rows in the flattened [A * N] (agent, entity) offsets of _relative_few_envs
+        self._seen_flat_rows = [i * (n_landmarks + n_agents) + row for i, rows in enumerate(self._seen_rows) for row in rows]
         self._seen_rows_on: dict = {}  # (which rows, device) -> [A, R] index tensor
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._obs_cache = None  # (pos stack, vel stack, observations) of the last state observed
+        self._relative_cache = None  # (pos stack, offsets) of the last state, few envs only
         self._overlap = None  # see _overlap_thresholds
         return world
 
@@ -101,15 +104,29 @@ class Scenario(BaseScenario):
         overlaps = (_squared_gaps(ax, ay, ax, ay) < self._overlap_thresholds(x.device)[1]).sum(dim=(0, 1))
         return -n_agents * coverage - overlaps.float()
 
-    def _reward_few_envs(self) -> torch.Tensor:
-        # the same reward in about half the calls: at a few envs each call's overhead is the cost
+    def _relative_few_envs(self) -> torch.Tensor:
+        """``[A, N, B, 2]``: every entity's position minus each agent's, once per state (few envs).
+
+        The reward's distances and the observations' relative positions are
+        both read from it: at a few envs each call's fixed cost is the cost, so
+        one subtraction for both saves a dozen calls per step.
+        """
         pos = self.world.stacked_state("pos")
+        cached = self._relative_cache
+        if cached is not None and cached[0] is pos:
+            return cached[1]
+        relative = pos.unsqueeze(0) - pos[len(self.world.landmarks):].unsqueeze(1)
+        self._relative_cache = (pos, relative)
+        return relative
+
+    def _reward_few_envs(self) -> torch.Tensor:
+        # the same reward in fewer calls: one norm over every (agent, entity) offset
+        relative = self._relative_few_envs()
         n_landmarks = len(self.world.landmarks)
-        agents, landmarks = pos[n_landmarks:], pos[:n_landmarks]
-        coverage = torch.linalg.vector_norm(agents.unsqueeze(1) - landmarks.unsqueeze(0), dim=-1).amin(dim=0).sum(dim=0)
-        spacing = torch.linalg.vector_norm(agents.unsqueeze(1) - agents.unsqueeze(0), dim=-1)  # [A, A, B]
-        overlaps = (spacing < self._overlap_thresholds(pos.device)[0]).sum(dim=(0, 1))
-        return -agents.shape[0] * coverage - overlaps.float()
+        distance = torch.linalg.vector_norm(relative, dim=-1)  # [A, N, B]
+        coverage = distance[:, :n_landmarks].amin(dim=0).sum(dim=0)
+        overlaps = (distance[:, n_landmarks:] < self._overlap_thresholds(relative.device)[0]).sum(dim=(0, 1))
+        return torch.sub(coverage * -relative.shape[0], overlaps)
 
     def observation(self, agent: Agent) -> torch.Tensor:
         index = self._agent_index[agent.name]
@@ -141,9 +158,10 @@ class Scenario(BaseScenario):
             return cached[2]
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
-        if pos.shape[1] < FEW_ENVS:  # fewer calls
-            relative = self._gathered_rows(pos, self._seen_rows).sub_(own_pos.unsqueeze(1))  # [A, R, B, 2]
-            observations = torch.cat([own_pos, own_vel, relative.permute(0, 2, 1, 3).flatten(2)], dim=-1)
+        if pos.shape[1] < FEW_ENVS:  # fewer calls: the seen rows of the offsets the reward used
+            seen = self._gathered_rows(self._relative_few_envs().flatten(0, 1), [self._seen_flat_rows], key="relative")
+            seen = seen.view(own_pos.shape[0], -1, *pos.shape[1:])  # [A, R, B, 2]
+            observations = torch.cat([own_pos, own_vel, seen.permute(0, 2, 1, 3).flatten(2)], dim=-1)
         else:
             # lay out [A, B, (own pos, own vel, landmarks, other agents), 2] moving whole (x, y)
             # pairs (see layout.as_pairs); each relative position is subtracted straight into its

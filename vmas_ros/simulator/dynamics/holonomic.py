@@ -10,4 +10,5 @@ class Holonomic(Dynamics):
         return 2
 
     def process_action(self) -> None:
-        self.agent.state.force = self.agent.action.u[:, :2]
+        u = self.agent.action.u
+        self.agent.state.force = u if u.shape[1] == 2 else u[:, :2]

@@ -1,0 +1,155 @@
+"""The world's state store: entities read their state lazily after a step, and every change is seen.
+
+The store replaced eager per-entity write-back (see simulator/state_store.py);
+these tests pin the VMAS semantics it must keep: an entity's tensors alias its
+state until the next step, setters and in-place writes are seen by the next
+step and by ``stacked_state``, and adding entities or moving devices loses nothing.
+"""
+from __future__ import annotations
+
+import pytest
+import torch
+
+import vmas_ros
+from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
+
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+def _world(device, n_agents=3, batch=4):
+    world = World(batch_dim=batch, device=device)
+    for i in range(n_agents):
+        world.add_agent(Agent(name=f"a{i}", shape=Sphere(0.1)))
+    for i, agent in enumerate(world.agents):
+        agent.set_pos(torch.tensor([0.5 * i, 0.0], device=device), batch_index=None)
+        agent.set_vel(torch.tensor([0.1, 0.2 * i], device=device), batch_index=None)
+    return world
+
+
+def _state(world):
+    return {f: torch.stack([getattr(e.state, f) for e in world.entities]).clone() for f in ("pos", "vel", "rot", "ang_vel")}
+
+
+def _twin_runs(device, edit, steps=3):
+    """Two identical worlds; ``edit(world)`` after the first step of one of them."""
+    worlds = [_world(device), _world(device)]
+    for step in range(steps):
+        for i, world in enumerate(worlds):
+            world.step()
+            if step == 0 and i == 1:
+                edit(world)
+    return [_state(w) for w in worlds]
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_step_leaves_every_field_readable_and_stacked_state_agrees(device):
+    world = _world(device)
+    world.step()
+    for field in ("pos", "vel", "rot", "ang_vel"):
+        stacked = world.stacked_state(field)
+        assert stacked is world.stacked_state(field), "one stack per state: caches key on its identity"
+        for i, entity in enumerate(world.entities):
+            value = getattr(entity.state, field)
+            assert value.shape == (4, 2 if field in ("pos", "vel") else 1) and value.device.type == torch.device(device).type
+            assert torch.equal(value, stacked[i])
+    x, y = world.stacked_xy("pos")
+    assert torch.equal(torch.stack([x, y], -1), world.stacked_state("pos"))
+    before = world.stacked_state("pos")
+    world.step()
+    assert world.stacked_state("pos") is not before
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_tensors_read_before_a_step_keep_their_values(device):
+    world = _world(device)
+    world.step()
+    old = world.agents[1].state.pos
+    kept = old.clone()
+    world.step()
+    assert torch.equal(old, kept), "the step must not write into tensors handed out before it"
+    assert not torch.equal(world.agents[1].state.pos, kept)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("edit", ["pos_in_place", "rot_in_place", "vel_setter", "set_pos_index", "ang_vel_in_place"])
+def test_changes_between_steps_reach_the_next_step(device, edit):
+    def change(world):
+        a = world.agents[0].state
+        if edit == "pos_in_place":
+            a.pos[:, 0] += 0.3
+        elif edit == "rot_in_place":
+            a.rot[:] = 1.0
+        elif edit == "ang_vel_in_place":
+            a.ang_vel.add_(2.0)
+        elif edit == "vel_setter":
+            a.vel = torch.zeros(4, 2, device=device)
+        elif edit == "set_pos_index":
+            world.agents[0].set_pos(torch.tensor([0.9, 0.9], device=device), batch_index=2)
+
+    untouched, edited = _twin_runs(device, change)
+    changed = {f for f in untouched if not torch.equal(untouched[f][0], edited[f][0])}
+    assert changed, f"{edit}: the edit after step 1 did not change agent a0's later state"
+    # the other agents are far from a0 (no contact): they must not notice anything
+    for f in untouched:
+        assert torch.equal(untouched[f][1:], edited[f][1:])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_an_in_place_write_is_seen_at_once_by_stacked_state_and_by_other_entities(device):
+    world = _world(device)
+    world.step()
+    expected = world.stacked_state("pos").clone()
+    world.agents[0].state.pos[1] = torch.tensor([7.0, 8.0], device=device)
+    expected[0, 1] = torch.tensor([7.0, 8.0], device=device)
+    assert torch.equal(world.stacked_state("pos"), expected)
+    x, _ = world.stacked_xy("pos")
+    assert x[0, 1] == 7.0
+    assert torch.equal(world.agents[2].state.pos, expected[2]), "an untouched entity still reads its own state"
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_adding_entities_after_steps_keeps_every_state(device):
+    world = _world(device)
+    world.step()
+    world.step()
+    before = _state(world)
+    world.add_landmark(Landmark(name="late_landmark", collide=False))  # landmarks come first: every row moves
+    world.add_agent(Agent(name="late_agent", shape=Sphere(0.1)))
+    after = _state(world)
+    for f in before:
+        assert torch.equal(after[f][1:1 + 3], before[f]), f"{f} of the first agents changed when entities were added"
+        assert torch.equal(after[f][0], torch.zeros_like(after[f][0]))
+    world.step()  # and the bigger world steps
+    assert world.stacked_state("pos").shape[0] == 5
+
+
+def test_moving_the_world_keeps_its_state():
+    world = _world("cpu")
+    world.step()
+    before = _state(world)
+    world.to("cpu")
+    assert all(torch.equal(before[f], _state(world)[f]) for f in before)
+    world.step()  # steps from the entities' own tensors
+    assert torch.isfinite(world.stacked_state("pos")).all()
+
+
+def test_an_entity_outside_a_world_refuses_state_but_reads_none():
+    agent = Agent(name="loose")
+    assert agent.state.pos is None
+    with pytest.raises(RuntimeError, match="add loose to a world"):
+        agent.state.pos = torch.zeros(1, 2)
+
+
+def test_env_steps_equal_with_and_without_reading_entity_state_between_steps():
+    """Reading (and so fetching) entity fields must not change what the steps compute."""
+    runs = []
+    for read in (False, True):
+        env = vmas_ros.make_env("simple_spread", num_envs=8, seed=11)
+        env.reset()
+        gen = torch.Generator().manual_seed(0)
+        for _ in range(5):
+            env.step([torch.rand(8, 2, generator=gen) * 2 - 1 for _ in env.agents])
+            if read:
+                [(a.state.pos, a.state.vel, a.state.rot) for a in env.world.entities]
+        runs.append(torch.stack([a.state.pos for a in env.world.entities]))
+    assert torch.equal(runs[0], runs[1])
