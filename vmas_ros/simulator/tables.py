@@ -31,8 +31,37 @@ PAIR_KINDS: Tuple[Tuple[str, str], ...] = (
 _KIND_ORDER = {"box": 0, "line": 1, "sphere": 2}
 
 
+def incidence(index: Tensor, n_entities: int, dtype: torch.dtype) -> Tensor:
+    """``[N, P]`` 0/1 matrix with a 1 at (index[p], p): ``M @ values`` adds each pair's ``[P, B]`` value
+    onto its entity (a scatter as one GEMM; see physics.scatter_by_gemm)."""
+    matrix = torch.zeros(n_entities, index.numel(), device=index.device, dtype=dtype)
+    matrix[index, torch.arange(index.numel(), device=index.device)] = 1.0
+    return matrix
+
+
+class _Incidence:
+    """Cached dense incidence matrices of a pair list, per (number of entities, dtype)."""
+
+    def incidence_ab(self, n_entities: int, dtype: torch.dtype) -> Tuple[Tensor, Tensor]:
+        """(``[N, P]`` of the first members, ``[N, P]`` of the second ones)."""
+        cache = self.__dict__.setdefault("_incidence", {})
+        key = (n_entities, dtype)
+        if key not in cache:
+            cache[key] = (incidence(self.index_a, n_entities, dtype), incidence(self.index_b, n_entities, dtype))
+        return cache[key]
+
+    def incidence_opposite(self, n_entities: int, dtype: torch.dtype) -> Tensor:
+        """``[N, P]``: +1 at the first member, -1 at the second (a value on a, its opposite on b)."""
+        cache = self.__dict__.setdefault("_incidence", {})
+        key = ("opposite", n_entities, dtype)
+        if key not in cache:
+            on_a, on_b = self.incidence_ab(n_entities, dtype)
+            cache[key] = on_a - on_b
+        return cache[key]
+
+
 @dataclass
-class PairTable:
+class PairTable(_Incidence):
     """Entity indices of every pair handled by one collision kernel, plus shape params."""
 
     kind: Tuple[str, str]
@@ -56,7 +85,7 @@ class PairTable:
 
 
 @dataclass
-class JointTable:
+class JointTable(_Incidence):
     """Static part of all joint constraints; fixed rotations are read per step."""
 
     constraints: list
