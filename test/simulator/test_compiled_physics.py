@@ -66,3 +66,32 @@ def test_compiled_lidar_equals_eager(device):
     # some rays hit an obstacle, so the comparison is not between two all-max readings
     assert (expected < agent_e.sensors[0].max_range).any()
     assert compiled.world._ray_kernels["sphere"] is not eager.world._ray_kernels["sphere"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("num_envs", [1, 64])
+def test_the_compiled_step_is_one_graph_from_the_first_step(device, num_envs):
+    """Compiling before any eager step must still give one graph: a cache filled inside the traced
+    step (tables' helpers) breaks it into several, each with its own call overhead."""
+    from torch._dynamo.utils import counters
+
+    env = vmas_ros.make_env("simple_spread", num_envs=num_envs, device=device, seed=1, compile_physics=True)
+    graphs, breaks = counters["stats"]["unique_graphs"], sum(counters["graph_break"].values())
+    actions = [torch.zeros(num_envs, 2, device=device) for _ in env.agents]
+    for _ in range(3):
+        env.step(actions)
+    assert counters["stats"]["unique_graphs"] - graphs == 1
+    assert sum(counters["graph_break"].values()) == breaks
+
+
+@pytest.mark.slow
+def test_many_compiled_worlds_in_one_process_all_stay_compiled(device):
+    """Each world compiles its own copy of the step: dynamo gives up on a function after eight
+    recompilations, which shared code would reach with the ninth world of a process."""
+    from torch._dynamo.utils import counters
+
+    graphs = counters["stats"]["unique_graphs"]
+    for n_agents in range(1, 11):  # ten different worlds
+        env = vmas_ros.make_env("simple_spread", num_envs=2, device=device, n_agents=n_agents, compile_physics=True)
+        env.step([torch.zeros(2, 2, device=device) for _ in env.agents])
+    assert counters["stats"]["unique_graphs"] - graphs == 10

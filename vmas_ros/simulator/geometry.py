@@ -59,7 +59,7 @@ def broadcast_shape(*shapes: Sequence[int]) -> Tuple[int, ...]:
     ``torch.broadcast_shapes`` imports sympy on first use: about 30 MB of
     resident memory that a simulation never needs.
     """
-    n = max((len(shape) for shape in shapes), default=0)
+    n = max([len(shape) for shape in shapes] + [0])  # (a list, not a generator: torch.compile traces this)
     result = [1] * n
     for shape in shapes:
         for i, size in enumerate(shape, start=n - len(shape)):

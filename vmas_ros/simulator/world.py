@@ -10,6 +10,7 @@ physical properties changes.
 """
 from __future__ import annotations
 
+import types
 from typing import Dict, List, Optional, Tuple
 
 import torch
@@ -32,6 +33,7 @@ from vmas_ros.simulator.utils import (
     LINEAR_FRICTION,
     TORQUE_CONSTRAINT_FORCE,
 )
+from vmas_ros.simulator.world_actions import ActionInputs
 from vmas_ros.simulator.world_rays import RayQueries
 
 __all__ = ["World"]
@@ -42,11 +44,22 @@ def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) 
     return len(parts) == len(current) and all(a is b and a._version == v for a, b, v in zip(parts, current, versions))
 
 
+def _own_copy(fn):
+    """``fn`` with a code object of its own, for one world's ``torch.compile``.
+
+    Dynamo keeps compiled graphs per code object and gives up (runs eagerly)
+    after eight recompilations of one; every world's tables are guarded on, so
+    without a private copy the ninth compiled world in a process (a test
+    session, a sweep) would silently lose its compiled step.
+    """
+    return types.FunctionType(fn.__code__.replace(), fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__)
+
+
 #: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
 _EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
 
 
-class World(RayQueries):
+class World(RayQueries, ActionInputs):
     """A batch of ``batch_dim`` 2D worlds sharing the same entities (VMAS ``World``)."""
 
     def __init__(
@@ -139,9 +152,10 @@ class World(RayQueries):
             self._physics_step = physics.step_planar
             self._ray_kernels = _EAGER_RAY_KERNELS
             return
-        self._physics_step = torch.compile(physics.step_planar, dynamic=False, mode=mode)
+        self._physics_step = torch.compile(_own_copy(physics.step_planar), dynamic=False, mode=mode)
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
-        self._ray_kernels = {kind: torch.compile(fn, dynamic=False, mode=mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
+        self._ray_kernels = {kind: torch.compile(_own_copy(fn), dynamic=False, mode=mode)
+                             for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
@@ -287,7 +301,6 @@ class World(RayQueries):
 
     def _planar_from_entities(self, entities: List[Entity]) -> physics.PlanarState:
         """The physics state ``[3, N, B]`` (q and v) stacked from the entities' own tensors."""
-        n = len(entities)
         out = []
         for lin, ang in (("pos", "rot"), ("vel", "ang_vel")):
             linear = split_xy_stacked(torch.stack([getattr(e.state, lin) for e in entities]))
@@ -336,80 +349,6 @@ class World(RayQueries):
         if split is None or split[0] is not stack:
             split = self._xy_splits[field] = (stack, split_xy_stacked(stack.contiguous()))
         return split[1][0], split[1][1]
-
-    def _action_stack(self, tables: WorldTables, q: Tensor) -> Tensor:
-        """The step's action input ``[3, N, B]`` (fx, fy, torque per entity, zero for landmarks; see physics.stack_actions).
-
-        A fresh tensor: the physics adds contact forces into it.
-        """
-        n_agents = tables.n_agents
-        if n_agents and q.numel() <= physics.SMALL_BATCH_ELEMENTS:
-            # few elements: each call's fixed cost dominates, so write the agents' rows into zeros
-            # through strided views (five calls, where the large-batch layout below takes a dozen)
-            agent_force, agent_torque = self._agent_actions(tables)
-            actions = q.new_zeros(q.shape)
-            rows = actions[:, tables.n_entities - n_agents:]
-            rows[:2].copy_(agent_force.permute(2, 0, 1))
-            rows[2].copy_(agent_torque[..., 0])
-            return actions
-        force, torque = self._action_forces(tables, q[0])
-        return physics.stack_actions(force, torque)
-
-    def _action_forces(self, tables: WorldTables, like: Tensor) -> Tuple[Tensor, Tensor]:
-        """Agents' clamped action forces [N, B, 2] and torques [N, B, 1], zero for landmarks (``like``: [N, B])."""
-        n_agents = tables.n_agents
-        if n_agents == 0:
-            return like.new_zeros(*like.shape, 2), like.new_zeros(*like.shape, 1)
-        n_landmarks = tables.n_entities - n_agents
-        if not (tables.limits_force or tables.limits_torque or self._fixed_agents(tables)):
-            # the common case: one stack per field, landmarks' rows from a cached zero block
-            zero_f, zero_t = self._zero_rows(like)
-            return (torch.stack([zero_f] * n_landmarks + [a.state._force for a in self._agents]),
-                    torch.stack([zero_t] * n_landmarks + [a.state._torque for a in self._agents]))
-        agent_force, agent_torque = self._agent_actions(tables)
-        if n_landmarks == 0:
-            return agent_force, agent_torque
-        force = torch.cat([agent_force.new_zeros((n_landmarks, *agent_force.shape[1:])), agent_force])
-        torque = torch.cat([agent_torque.new_zeros((n_landmarks, *agent_torque.shape[1:])), agent_torque])
-        return force, torque
-
-    def _agent_actions(self, tables: WorldTables) -> Tuple[Tensor, Tensor]:
-        """Agents' action forces [A, B, 2] and torques [A, B, 1], clamped to their limits as VMAS does."""
-        forces = [a.state._force for a in self._agents]
-        torques = [a.state._torque for a in self._agents]
-        fixed = self._fixed_agents(tables)
-        agent_force, agent_torque = torch.stack(forces), torch.stack(torques)
-        if tables.limits_force:
-            agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
-            agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
-        if tables.limits_torque:
-            agent_torque = physics.clamp_norm(agent_torque, tables.agent_max_t)
-            agent_torque = torch.maximum(torch.minimum(agent_torque, tables.agent_t_range), -tables.agent_t_range)
-        if tables.limits_force or tables.limits_torque:
-            # clamped actions are visible to scenarios, as in VMAS
-            for agent, f, t in zip(self._agents, agent_force.unbind(0), agent_torque.unbind(0)):
-                if agent.movable:
-                    agent.state._force = f
-                if agent.rotatable:
-                    agent.state._torque = t
-        if fixed:
-            agent_force = torch.where(tables.agent_movable, agent_force, 0.0)
-            agent_torque = torch.where(tables.agent_rotatable, agent_torque, 0.0)
-        return agent_force, agent_torque
-
-    def _fixed_agents(self, tables: WorldTables) -> bool:
-        """Whether some agent cannot move or rotate (its action force or torque is then ignored)."""
-        cached = getattr(tables, "_fixed_agents_cache", None)
-        if cached is None:
-            cached = tables._fixed_agents_cache = not all(a.movable and a.rotatable for a in self._agents)
-        return cached
-
-    def _zero_rows(self, like: Tensor) -> Tuple[Tensor, Tensor]:
-        """Cached zero force [B, 2] and torque [B, 1] rows for entities without actions."""
-        cached = getattr(self, "_zero_rows_cache", None)
-        if cached is None or cached[0].device != like.device or cached[0].shape[0] != like.shape[1]:
-            cached = self._zero_rows_cache = (like.new_zeros(like.shape[1], 2), like.new_zeros(like.shape[1], 1))
-        return cached
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""
