@@ -80,7 +80,10 @@ def test_the_compiled_step_is_one_graph_from_the_first_step(device, num_envs):
     actions = [torch.zeros(num_envs, 2, device=device) for _ in env.agents]
     for _ in range(3):
         env.step(actions)
-    assert counters["stats"]["unique_graphs"] - graphs == 1
+    # the physics step, and at a few envs simple_spread's reward and observation kernel (a WorldKernel)
+    from vmas_ros.scenarios.mpe.simple_spread import FEW_ENVS
+
+    assert counters["stats"]["unique_graphs"] - graphs == (2 if num_envs < FEW_ENVS else 1)
     assert sum(counters["graph_break"].values()) == breaks
 
 
@@ -94,4 +97,28 @@ def test_many_compiled_worlds_in_one_process_all_stay_compiled(device):
     for n_agents in range(1, 11):  # ten different worlds
         env = vmas_ros.make_env("simple_spread", num_envs=2, device=device, n_agents=n_agents, compile_physics=True)
         env.step([torch.zeros(2, 2, device=device) for _ in env.agents])
-    assert counters["stats"]["unique_graphs"] - graphs == 10
+    # two graphs per world: the physics step and simple_spread's few-envs kernel (compiled with it)
+    assert counters["stats"]["unique_graphs"] - graphs == 20
+
+
+@pytest.mark.slow
+def test_world_kernel_follows_the_world_and_equals_eager(device):
+    """A scenario's WorldKernel runs eagerly until its world compiles, then as one compiled graph."""
+    from torch._dynamo.utils import counters
+
+    from vmas_ros.simulator.compiling import WorldKernel
+
+    env = vmas_ros.make_env("simple_spread", num_envs=4, device=device, seed=2)
+
+    def spread(q, v):
+        return (q[:2] - q[:2].mean(dim=1, keepdim=True)).square().sum(dim=(0, 1)) + v.abs().sum(dim=(0, 1))
+
+    kernel = WorldKernel(env.world, spread)
+    q, v = env.world.planar_state()
+    graphs = counters["stats"]["unique_graphs"]
+    eager = kernel(q, v)
+    assert counters["stats"]["unique_graphs"] == graphs, "an eager world's kernel must not compile"
+    env.world.compile_physics()
+    compiled = kernel(q, v)
+    assert counters["stats"]["unique_graphs"] == graphs + 1
+    torch.testing.assert_close(compiled, eager, rtol=1e-5, atol=1e-6)

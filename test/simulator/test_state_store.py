@@ -153,3 +153,17 @@ def test_env_steps_equal_with_and_without_reading_entity_state_between_steps():
                 [(a.state.pos, a.state.vel, a.state.rot) for a in env.world.entities]
         runs.append(torch.stack([a.state.pos for a in env.world.entities]))
     assert torch.equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_planar_state_is_the_step_output_and_follows_changes(device):
+    world = _world(device)
+    world.step()
+    q, v = world.planar_state()
+    assert q is world.planar_state()[0], "unchanged state: the same tensors (scenarios cache on them)"
+    assert torch.equal(q[:2].permute(1, 2, 0), world.stacked_state("pos"))
+    assert torch.equal(v[2], world.stacked_state("ang_vel")[..., 0])
+    world.agents[1].set_pos(torch.tensor([3.0, -2.0], device=device), batch_index=None)
+    moved, _ = world.planar_state()
+    assert moved is not q and moved[0, 1].eq(3.0).all() and moved[1, 1].eq(-2.0).all()
+    assert moved is world.planar_state()[0], "rebuilt once per change, not per call"

@@ -102,8 +102,11 @@ class BatchedLidars:
             for group in groups:
                 pos = torch.stack([e.state.pos for e in group.union]).unsqueeze(1)  # [E, 1, B, 2]
                 cx, cy = pos[..., 0:1], pos[..., 1:2]
-                if group.kind == "sphere":
-                    d = raycast.ray_sphere_xy(ox, oy, cos_a, sin_a, cx, cy, group.sizes[0], max_range)
+                if group.kind == "sphere":  # the nearest hit over the group, as measure() casts it
+                    ignore = (~group.mask).to(cos_a.dtype) if group.partial else None
+                    nearest = torch.minimum(nearest, raycast.ray_sphere_nearest_xy(
+                        ox, oy, cos_a, sin_a, cx, cy, group.sizes[0], max_range, ignore=ignore))
+                    continue
                 else:
                     rot = torch.stack([e.state.rot for e in group.union])  # [E, B, 1], as measure() stacks it
                     cos_r, sin_r = torch.cos(rot).unsqueeze(1), torch.sin(rot).unsqueeze(1)

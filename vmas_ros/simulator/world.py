@@ -10,7 +10,6 @@ physical properties changes.
 """
 from __future__ import annotations
 
-import types
 from typing import Dict, List, Optional, Tuple
 
 import torch
@@ -19,6 +18,7 @@ from torch import Tensor
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
+from vmas_ros.simulator.compiling import compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
 from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.shapes import Box, Line, Sphere
@@ -44,19 +44,9 @@ def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) 
     return len(parts) == len(current) and all(a is b and a._version == v for a, b, v in zip(parts, current, versions))
 
 
-def _own_copy(fn):
-    """``fn`` with a code object of its own, for one world's ``torch.compile``.
-
-    Dynamo keeps compiled graphs per code object and gives up (runs eagerly)
-    after eight recompilations of one; every world's tables are guarded on, so
-    without a private copy the ninth compiled world in a process (a test
-    session, a sweep) would silently lose its compiled step.
-    """
-    return types.FunctionType(fn.__code__.replace(), fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__)
-
-
 #: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
-_EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
+#: (spheres: the nearest hit over the targets; boxes and lines: per target)
+_EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_nearest_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
 
 
 class World(RayQueries, ActionInputs):
@@ -117,6 +107,7 @@ class World(RayQueries, ActionInputs):
         self._broad_phase = self.default_broad_phase
         #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
         self._physics_step = physics.step_planar
+        self._compile_mode: Optional[str] = None
         #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
         self._ray_kernels = _EAGER_RAY_KERNELS
 
@@ -148,18 +139,23 @@ class World(RayQueries, ActionInputs):
         compiler may reorder and fuse float ops, so parity with VMAS is only
         bit-exact on the eager path.
         """
+        self._compile_mode = mode
         if not enabled:
             self._physics_step = physics.step_planar
             self._ray_kernels = _EAGER_RAY_KERNELS
             return
-        self._physics_step = torch.compile(_own_copy(physics.step_planar), dynamic=False, mode=mode)
+        self._physics_step = compile_for_world(physics.step_planar, mode)
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
-        self._ray_kernels = {kind: torch.compile(_own_copy(fn), dynamic=False, mode=mode)
-                             for kind, fn in _EAGER_RAY_KERNELS.items()}
+        self._ray_kernels = {kind: compile_for_world(fn, mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
         return self._physics_step is not physics.step_planar
+
+    @property
+    def compile_mode(self) -> Optional[str]:
+        """The ``mode`` given to :meth:`compile_physics` (scenario kernels compile with it too)."""
+        return self._compile_mode
 
     # ------------------------------------------------------------------ registry
     def add_agent(self, agent: Agent) -> None:
@@ -349,6 +345,26 @@ class World(RayQueries, ActionInputs):
         if split is None or split[0] is not stack:
             split = self._xy_splits[field] = (stack, split_xy_stacked(stack.contiguous()))
         return split[1][0], split[1][1]
+
+    def planar_state(self) -> Tuple[Tensor, Tensor]:
+        """``(q, v)``, each ``[3, n_entities, batch]``: (x, y, angle) and (vx, vy, angular velocity) of every entity.
+
+        The physics step's own layout: right after a step these are its output
+        (no copy, the same objects until the state changes, so scenarios can
+        cache on their identity); otherwise they are stacked from the entities
+        once per change. For scenario kernels that compute from the whole state
+        at once (see ``compiling.WorldKernel``). Read-only.
+        """
+        store = self._store
+        if store.clean():
+            return store.planar()
+        current = [getattr(e.state, f) for f in ("pos", "rot", "vel", "ang_vel") for e in self.entities]
+        cached = self._stacks.get("planar")
+        if cached is not None and _unchanged(cached[0], cached[1], current):
+            return cached[2]
+        state = self._planar_from_entities(self.entities)
+        self._stacks["planar"] = (current, [t._version for t in current], (state.q, state.v))
+        return state.q, state.v
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""

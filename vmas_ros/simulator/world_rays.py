@@ -55,9 +55,11 @@ class RayQueries:
                 continue
             pos = torch.stack([e.state.pos for e in group])  # [E, B, 2]
             cx, cy = pos[..., 0:1], pos[..., 1:2]
-            if kind == "sphere":
+            if kind == "sphere":  # its kernel returns the nearest hit over the group already
                 radius = torch.tensor([e.shape.radius for e in group], device=self._device).view(-1, 1, 1)
-                d = self._ray_kernels["sphere"](ox, oy, cos_a, sin_a, cx, cy, radius, max_range)
+                nearest = torch.minimum(nearest, self._ray_kernels["sphere"](ox, oy, cos_a, sin_a, cx, cy, radius,
+                                                                             max_range))
+                continue
             else:
                 rot = torch.stack([e.state.rot for e in group])  # [E, B, 1]
                 cos_r, sin_r = torch.cos(rot), torch.sin(rot)

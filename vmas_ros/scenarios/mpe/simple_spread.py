@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.layout import as_pairs
@@ -62,7 +63,8 @@ class Scenario(BaseScenario):
         self._seen_rows_on: dict = {}  # (which rows, device) -> [A, R] index tensor
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._obs_cache = None  # (pos stack, vel stack, observations) of the last state observed
-        self._relative_cache = None  # (pos stack, offsets) of the last state, few envs only
+        self._few_cache = None  # (pos stack, vel stack, (rewards, observations)) of the last state, few envs only
+        self._few_kernel = WorldKernel(world, _few_envs_outputs)  # compiled with the world's physics
         self._overlap = None  # see _overlap_thresholds
         return world
 
@@ -104,29 +106,29 @@ class Scenario(BaseScenario):
         overlaps = (_squared_gaps(ax, ay, ax, ay) < self._overlap_thresholds(x.device)[1]).sum(dim=(0, 1))
         return -n_agents * coverage - overlaps.float()
 
-    def _relative_few_envs(self) -> torch.Tensor:
-        """``[A, N, B, 2]``: every entity's position minus each agent's, once per state (few envs).
+    def _few_envs(self) -> tuple:
+        """``(rewards [B], observations [A, B, obs])`` in one pass over the state, once per state (few envs).
 
-        The reward's distances and the observations' relative positions are
-        both read from it: at a few envs each call's fixed cost is the cost, so
-        one subtraction for both saves a dozen calls per step.
+        At a few envs each tensor call's fixed cost is the cost: both are read
+        from one ``[A, N, B, 2]`` table of offsets, and the whole computation is
+        one :class:`~vmas_ros.simulator.compiling.WorldKernel` (one compiled
+        call when the world compiles its physics). Keyed on the identity of the
+        world's stacked positions and velocities, like :meth:`_observations`.
         """
-        pos = self.world.stacked_state("pos")
-        cached = self._relative_cache
-        if cached is not None and cached[0] is pos:
-            return cached[1]
-        relative = pos.unsqueeze(0) - pos[len(self.world.landmarks):].unsqueeze(1)
-        self._relative_cache = (pos, relative)
-        return relative
+        world = self.world
+        q, v = world.planar_state()
+        cached = self._few_cache
+        if cached is not None and cached[0] is q and cached[1] is v:
+            return cached[2]
+        seen = self._seen_rows_on.get(("relative", q.device))
+        if seen is None:
+            seen = self._seen_rows_on[("relative", q.device)] = torch.tensor(self._seen_flat_rows, device=q.device)
+        outputs = self._few_kernel(q, v, len(world.landmarks), self._overlap_thresholds(q.device)[0], seen)
+        self._few_cache = (q, v, outputs)
+        return outputs
 
     def _reward_few_envs(self) -> torch.Tensor:
-        # the same reward in fewer calls: one norm over every (agent, entity) offset
-        relative = self._relative_few_envs()
-        n_landmarks = len(self.world.landmarks)
-        distance = torch.linalg.vector_norm(relative, dim=-1)  # [A, N, B]
-        coverage = distance[:, :n_landmarks].amin(dim=0).sum(dim=0)
-        overlaps = (distance[:, n_landmarks:] < self._overlap_thresholds(relative.device)[0]).sum(dim=(0, 1))
-        return torch.sub(coverage * -relative.shape[0], overlaps)
+        return self._few_envs()[0]
 
     def observation(self, agent: Agent) -> torch.Tensor:
         index = self._agent_index[agent.name]
@@ -134,7 +136,7 @@ class Scenario(BaseScenario):
         if index == len(self._agent_index) - 1:
             # the environment asks in agent order: the next collection computes afresh, so
             # observations handed out (without a copy, see fresh_observations) never alias later ones
-            self._obs_cache = None
+            self._obs_cache = self._few_cache = None
         return observation
 
     def _gathered_rows(self, pos: torch.Tensor, rows: list, key: str = "all") -> torch.Tensor:
@@ -158,10 +160,8 @@ class Scenario(BaseScenario):
             return cached[2]
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
-        if pos.shape[1] < FEW_ENVS:  # fewer calls: the seen rows of the offsets the reward used
-            seen = self._gathered_rows(self._relative_few_envs().flatten(0, 1), [self._seen_flat_rows], key="relative")
-            seen = seen.view(own_pos.shape[0], -1, *pos.shape[1:])  # [A, R, B, 2]
-            observations = torch.cat([own_pos, own_vel, seen.permute(0, 2, 1, 3).flatten(2)], dim=-1)
+        if pos.shape[1] < FEW_ENVS:  # computed with the reward (see _few_envs)
+            observations = self._few_envs()[1]
         else:
             # lay out [A, B, (own pos, own vel, landmarks, other agents), 2] moving whole (x, y)
             # pairs (see layout.as_pairs); each relative position is subtracted straight into its
@@ -182,6 +182,28 @@ class Scenario(BaseScenario):
             observations = observations.flatten(2)
         self._obs_cache = (pos, vel, observations)
         return observations
+
+
+def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below: torch.Tensor,
+                      seen: torch.Tensor) -> tuple:
+    """Rewards ``[B]`` and observations ``[A, B, obs]`` from the planar state ``[3, N, B]`` (landmarks first).
+
+    ``overlap_below`` ``[A, A, 1]``: distance under which two agents overlap
+    (negative for pairs that cannot); ``seen``: each agent's observed rows of
+    the flattened ``[A * N]`` offsets. A pure function of tensors (see
+    ``WorldKernel``): the same numbers as the many-envs formulation.
+    """
+    xy = q[:2].permute(1, 2, 0).contiguous()  # [N, B, 2]: contiguous pairs (strided ones slow every op below)
+    agents = xy[n_landmarks:]
+    relative = xy.unsqueeze(0) - agents.unsqueeze(1)  # [A, N, B, 2]: every entity relative to each agent
+    distance = torch.linalg.vector_norm(relative, dim=-1)  # [A, N, B]
+    coverage = distance[:, :n_landmarks].amin(dim=0).sum(dim=0)
+    overlaps = (distance[:, n_landmarks:] < overlap_below).sum(dim=(0, 1))
+    rewards = torch.sub(coverage * -agents.shape[0], overlaps)
+    rows = torch.index_select(relative.flatten(0, 1), 0, seen).view(agents.shape[0], -1, *relative.shape[2:])
+    own_vel = v[:2, n_landmarks:].permute(1, 2, 0)
+    observations = torch.cat([agents, own_vel, rows.permute(0, 2, 1, 3).flatten(2)], dim=-1)
+    return rewards, observations
 
 
 def _subtract_into(destination: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> None:
