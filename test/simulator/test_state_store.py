@@ -167,3 +167,35 @@ def test_planar_state_is_the_step_output_and_follows_changes(device):
     moved, _ = world.planar_state()
     assert moved is not q and moved[0, 1].eq(3.0).all() and moved[1, 1].eq(-2.0).all()
     assert moved is world.planar_state()[0], "rebuilt once per change, not per call"
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_set_positions_equals_setting_each_entity_and_keeps_the_state_clean(device):
+    worlds = [_world(device, n_agents=4), _world(device, n_agents=4)]
+    for world in worlds:
+        world.step()
+    x = torch.tensor([[0.1] * 4, [0.2] * 4], device=device)
+    y = torch.tensor([[-0.3] * 4, [0.4] * 4], device=device)
+    batched, single = worlds
+    seen = []
+    batched.agents[1].subscribe(type("Watcher", (), {"notify": lambda self, *a, **k: seen.append(k)})())
+    batched.set_positions(batched.agents[1:3], x, y)
+    assert batched._store.clean(), "consecutive rows written after a step go straight into the state"
+    assert seen == [{"batch_index": None}], "observers hear about the move as with set_pos"
+    for agent, px, py in zip(single.agents[1:3], x, y):
+        agent.set_pos(torch.stack([px, py], -1), batch_index=None)
+    for a, b in zip(batched.entities, single.entities):
+        assert torch.equal(a.state.pos, b.state.pos)
+    assert torch.equal(batched.stacked_state("pos"), single.stacked_state("pos"))
+    batched.step()
+    single.step()
+    assert torch.equal(batched.stacked_state("pos"), single.stacked_state("pos"))
+    # not consecutive, or the state already changed: entity by entity, same result
+    batched.agents[0].set_vel(torch.zeros(4, 2, device=device), batch_index=None)
+    single.agents[0].set_vel(torch.zeros(4, 2, device=device), batch_index=None)
+    batched.set_positions([batched.agents[3], batched.agents[0]], x, y)
+    for agent, px, py in zip([single.agents[3], single.agents[0]], x, y):
+        agent.set_pos(torch.stack([px, py], -1), batch_index=None)
+    assert torch.equal(batched.stacked_state("pos"), single.stacked_state("pos"))
+    with pytest.raises(ValueError, match="2 entities but x"):
+        batched.set_positions(batched.agents[:2], x[:1], y[:1])

@@ -56,10 +56,10 @@ from vmas_ros.scenarios.flocking import (
     pairwise_distances,
     sample_clear_positions,
 )
+from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.contacts import mask_ge, mask_lt
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
-from vmas_ros.simulator.layout import join_xy
 from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
@@ -129,6 +129,8 @@ class Scenario(BaseScenario):
 
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._lidars = [AgentLidars(world, world.agents, slot) for slot in range(len(world.agents[0].sensors))]
+        # compiled when the world compiles its physics
+        self._respawn, self._reward_terms = WorldKernel(world, respawn_from), WorldKernel(world, reward_terms)
         self._not_self = ~torch.eye(self.n_agents, dtype=torch.bool, device=device).unsqueeze(-1)  # [N, N, 1]
         #: per env and target: covered at some step of this episode (only grows without respawns) [B, T]
         self.all_time_covered = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
@@ -167,17 +169,10 @@ class Scenario(BaseScenario):
         Terms are kept agent-major, ``[n_agents, B]``, so each agent's reward is a row.
         """
         x, y = self.world.stacked_xy("pos")  # the targets (landmarks) first, then the agents
-        n_targets = self.n_targets
-        tx, ty, ax, ay = x[:n_targets], y[:n_targets], x[n_targets:], y[n_targets:]
-        near = _distances(ax, ay, tx, ty) < self.covering_range  # [N, T, B]
-        covered = near.sum(dim=0) >= self.agents_per_target  # [T, B]
+        covered, self.covering_rew, self.shared_covering_rew, self.collision_rew = self._reward_terms(
+            x, y, self.n_targets, self.covering_range, self.agents_per_target, self.covering_rew_coeff,
+            self.agent_collision_penalty, self._not_self)
         self.covered_targets = covered.T  # [B, T]
-        self.covering_rew = (near & covered).sum(dim=1).float() * self.covering_rew_coeff  # [N, B]
-        team = self.covering_rew.sum(dim=0)
-        self.shared_covering_rew = torch.where(team != 0, team / 2, team)  # halved, as in VMAS 1.5
-        gap = _distances(ax, ay, ax, ay) - 2 * AGENT_RADIUS  # [N, N, B]
-        touching = (gap < COLLISION_DISTANCE) & self._not_self
-        self.collision_rew = touching.sum(dim=1).float() * self.agent_collision_penalty  # [N, B]
 
     def _move_covered_targets(self) -> None:
         """Respawn (or retire) the targets covered this step; runs after every agent's reward."""
@@ -185,17 +180,17 @@ class Scenario(BaseScenario):
         x, y = self.world.stacked_xy("pos")  # targets are the landmarks, the first rows
         n_targets = len(self.targets)
         if self.targets_respawn:
-            new_x, new_y = respawn_clear(
-                x[n_targets:], y[n_targets:], x[:n_targets], y[:n_targets], covered,
-                self.min_dist_between_entities, self.x_semidim, self.y_semidim, RESPAWN_CANDIDATES,
-            )
-            new = join_xy(new_x, new_y)  # [T, B, 2]
+            # respawn_clear, with the draws made here and the rest as one WorldKernel
+            cand_x, cand_y = draw_candidates(x.shape[1], self.x_semidim, self.y_semidim, RESPAWN_CANDIDATES, x.device)
+            new_x, new_y = self._respawn(cand_x, cand_y, x[n_targets:], y[n_targets:], x[:n_targets], y[:n_targets],
+                                         covered, self.min_dist_between_entities ** 2)
         else:
             self.all_time_covered = self.all_time_covered | self.covered_targets
-            old = self._stack(self.targets).transpose(0, 1)  # [T, B, 2]
-            new = torch.where(covered.unsqueeze(-1), self._outside_positions(covered.shape), old)
-        for target, pos in zip(self.targets, new.unbind(0)):
-            target.set_pos(pos, batch_index=None)
+            outside = self._outside_positions(covered.shape)  # [T, B, 2]
+            new_x = torch.where(covered, outside[..., 0], x[:n_targets])
+            new_y = torch.where(covered, outside[..., 1], y[:n_targets])
+        # all targets in one write into the world's state (they are its first rows)
+        self.world.set_positions(self.targets, new_x, new_y)
 
     def _outside_positions(self, shape) -> Tensor:
         """Far outside the arena, where no lidar or agent reaches: both coordinates in [-1000, -10] x x_semidim."""
@@ -250,6 +245,26 @@ class Scenario(BaseScenario):
         return geoms
 
 
+def reward_terms(
+    x: Tensor, y: Tensor, n_targets: int, covering_range: float, agents_per_target: int, covering_coeff: float,
+    collision_penalty: float, not_self: Tensor,
+) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Covered targets ``[T, B]`` (bool), covering rewards ``[N, B]``, the team's ``[B]`` and collision penalties ``[N, B]``.
+
+    From the planar rows ``x``, ``y`` ``[T + N, B]`` (targets first); a pure
+    function of tensors, run as a ``WorldKernel``.
+    """
+    tx, ty, ax, ay = x[:n_targets], y[:n_targets], x[n_targets:], y[n_targets:]
+    near = _distances(ax, ay, tx, ty) < covering_range  # [N, T, B]
+    covered = near.sum(dim=0) >= agents_per_target  # [T, B]
+    covering = (near & covered).sum(dim=1).float() * covering_coeff  # [N, B]
+    team = covering.sum(dim=0)
+    shared = torch.where(team != 0, team / 2, team)  # halved, as in VMAS 1.5
+    gap = _distances(ax, ay, ax, ay) - 2 * AGENT_RADIUS  # [N, N, B]
+    touching = (gap < COLLISION_DISTANCE) & not_self
+    return covered, covering, shared, touching.sum(dim=1).float() * collision_penalty
+
+
 def _distances(ax: Tensor, ay: Tensor, bx: Tensor, by: Tensor) -> Tensor:
     """Distances ``[I, J, B]`` between points ``(ax, ay)`` ``[I, B]`` and ``(bx, by)`` ``[J, B]``."""
     dx, dy = ax.unsqueeze(1) - bx.unsqueeze(0), ay.unsqueeze(1) - by.unsqueeze(0)
@@ -281,13 +296,32 @@ def respawn_clear(
     (probability about ``0.35 ** 16`` at the default density) stays for a step
     and respawns on the next one, when it is still covered.
     """
-    n_targets, batch = targets_x.shape
-    device = targets_x.device
-    # candidates [K, B]: every reduction below runs over the leading dim, across contiguous env rows
-    # (a reduction over a small trailing dim is a slow path on the CPU), and masks are float 0/1
+    cand_x, cand_y = draw_candidates(targets_x.shape[1], x_semidim, y_semidim, candidates, targets_x.device)
+    return respawn_from(cand_x, cand_y, agents_x, agents_y, targets_x, targets_y, covered, min_dist * min_dist)
+
+
+def draw_candidates(batch: int, x_semidim: float, y_semidim: float, candidates: int, device) -> tuple[Tensor, Tensor]:
+    """Each env's stream of ``candidates`` uniform points in the arena, ``(x, y)`` each ``[K, B]``."""
+    # candidates [K, B]: every reduction of respawn_from runs over the leading dim, across contiguous
+    # env rows (a reduction over a small trailing dim is a slow path on the CPU)
     cand_x = torch.empty(candidates, batch, device=device).uniform_(-x_semidim, x_semidim)
     cand_y = torch.empty(candidates, batch, device=device).uniform_(-y_semidim, y_semidim)
-    limit = min_dist * min_dist
+    return cand_x, cand_y
+
+
+def respawn_from(
+    cand_x: Tensor, cand_y: Tensor, agents_x: Tensor, agents_y: Tensor, targets_x: Tensor, targets_y: Tensor,
+    covered: Tensor, limit: float,
+) -> tuple[Tensor, Tensor]:
+    """:func:`respawn_clear` given the candidate stream ``[K, B]`` and the squared clearance ``limit``.
+
+    A pure function of tensors (the random draws are made outside), so the
+    scenario runs it as a ``WorldKernel``: compiled with the world, its
+    per-target loop unrolls into one fused graph. Masks are float 0/1.
+    """
+    n_targets, batch = targets_x.shape
+    candidates = cand_x.shape[0]
+    device = targets_x.device
 
     def squared_gaps(px: Tensor, py: Tensor) -> Tensor:  # points [M, B] -> [M, K, B]
         gap_x, gap_y = cand_x - px.unsqueeze(1), cand_y - py.unsqueeze(1)

@@ -99,6 +99,22 @@ class StateStore:
             return False
         return True
 
+    def write_rows(self, lo: int, hi: int, x: Tensor, y: Tensor) -> None:
+        """Set the positions of entities ``lo:hi`` to ``(x, y)`` (``[hi - lo, B]`` each) in place; only while clean.
+
+        The store stays clean: the write is recorded as its own, the stacks
+        built from the old positions are dropped and the generation moves on,
+        so every entity fetches fresh views (no entity holds an override while
+        the store is clean, so none is lost).
+        """
+        q = self._q
+        q[0, lo:hi] = x
+        q[1, lo:hi] = y
+        self.gen += 1
+        self._versions = (q._version, self._v._version)
+        self._stacks = {name: entry for name, entry in self._stacks.items() if name not in ("pos", "rot")}
+        self._pos = None
+
     # -------------------------------------------------------------- reading
     def planar(self) -> Tuple[Tensor, Tensor]:
         """``q``, ``v`` of the last step (only meaningful while :meth:`clean`)."""

@@ -20,7 +20,7 @@ from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
 from vmas_ros.simulator.compiling import compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
-from vmas_ros.simulator.layout import split_xy_stacked
+from vmas_ros.simulator.layout import join_xy, split_xy_stacked
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.state_store import StateStore
 from vmas_ros.simulator.tables import WorldTables, build_tables
@@ -345,6 +345,28 @@ class World(RayQueries, ActionInputs):
         if split is None or split[0] is not stack:
             split = self._xy_splits[field] = (stack, split_xy_stacked(stack.contiguous()))
         return split[1][0], split[1][1]
+
+    def set_positions(self, entities: List[Entity], x: Tensor, y: Tensor) -> None:
+        """Place several entities in every env at once: ``x``, ``y`` are ``[len(entities), B]``.
+
+        The same as ``entity.set_pos(...)`` for each of them (observers are
+        notified alike), but entities that are consecutive rows of
+        ``entities`` written right after a step go straight into the step's
+        state: two copies, and the next step needs no rebuild (discovery moves
+        its covered targets every step). Like a step, it hands every entity
+        fresh views of its state.
+        """
+        if len(entities) != x.shape[0] or x.shape != y.shape:
+            raise ValueError(f"set_positions: {len(entities)} entities but x {tuple(x.shape)} and y {tuple(y.shape)}")
+        slots = [e.state._slot for e in entities]
+        lo = slots[0] if slots else 0
+        if slots == list(range(lo, lo + len(slots))) and self._store.clean():
+            self._store.write_rows(lo, lo + len(slots), x, y)
+            for entity in entities:
+                entity.notify_observers(batch_index=None)
+            return
+        for entity, pos in zip(entities, join_xy(x, y).unbind(0)):
+            entity.set_pos(pos, batch_index=None)
 
     def planar_state(self) -> Tuple[Tensor, Tensor]:
         """``(q, v)``, each ``[3, n_entities, batch]``: (x, y, angle) and (vx, vy, angular velocity) of every entity.
