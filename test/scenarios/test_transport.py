@@ -267,3 +267,15 @@ def test_cached_observations_follow_the_state_and_never_alias():
         expected = torch.cat([package.state.pos - env.scenario.goal.state.pos, package.state.pos - agent.state.pos], -1)
         torch.testing.assert_close(obs[:, block : block + 4], expected, rtol=0, atol=0)
     assert not torch.equal(moved[0], first[0])
+
+
+def test_observation_layouts_agree():
+    """The compiled layout of the observations (one concatenation) equals the eager block writes."""
+    from vmas_ros.scenarios import transport
+
+    gen = torch.Generator().manual_seed(1)
+    for n_packages in (1, 3):
+        pos, vel = torch.randn(2 + n_packages + 3, 50, 2, generator=gen), torch.randn(2 + n_packages + 3, 50, 2, generator=gen)
+        on_goal = torch.rand(50, n_packages, generator=gen) > 0.5
+        assert torch.equal(transport._observations_by_cat(pos, vel, on_goal, n_packages),
+                           transport.observations(pos, vel, on_goal, n_packages))

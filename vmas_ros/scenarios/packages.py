@@ -106,10 +106,17 @@ def delivery_reward(previous: Tensor, potential: Tensor, on_goal: Tensor) -> Ten
 
 
 def package_colors(on_goal: Tensor) -> Tensor:
-    """Per-env colours [..., 3]: red while a package is away, green once it is on its goal."""
-    red = torch.tensor(Color.RED.value, device=on_goal.device)
-    green = torch.tensor(Color.GREEN.value, device=on_goal.device)
-    return torch.where(on_goal.unsqueeze(-1), green, red)
+    """Per-env colours [..., 3]: red while a package is away, green once it is on its goal.
+
+    A lookup in a cached two-row palette (one ``index_select``): painting runs every step.
+    """
+    palette = _PALETTES.get(on_goal.device)
+    if palette is None:
+        palette = _PALETTES[on_goal.device] = torch.tensor([Color.RED.value, Color.GREEN.value], device=on_goal.device)
+    return torch.index_select(palette, 0, on_goal.flatten().long()).view(*on_goal.shape, 3)
+
+
+_PALETTES: dict = {}  # device -> [2, 3] (red, green)
 
 
 # ---------------------------------------------------------------------- heuristics

@@ -37,6 +37,7 @@ import torch
 from vmas_ros.scenarios import packages as pk
 from vmas_ros.scenarios.common import read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
+from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -93,6 +94,8 @@ class Scenario(BaseScenario):
         self._reward = torch.zeros(batch_dim, device=world.device)
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._obs_cache = None  # (pos stack, vel stack, on_goal, observations) of the last state observed
+        # compiled when the world compiles its physics
+        self._status_kernel, self._observation_kernel = WorldKernel(world, package_status), WorldKernel(world, observations)
         return world
 
     # ------------------------------------------------------------------- reset
@@ -127,17 +130,8 @@ class Scenario(BaseScenario):
         the boundary point nearest it, or that point within the goal's reach),
         equal to float rounding, in a fraction of the passes.
         """
-        world = self.world
-        x, y = world.stacked_xy("pos")  # landmarks first: the goal, then the packages
-        rot = world.stacked_state("rot")[1 : 1 + self.n_packages, :, 0]
-        px, py, gx, gy = x[1 : 1 + self.n_packages], y[1 : 1 + self.n_packages], x[:1], y[:1]
-        distance = _hypot(px - gx, py - gy)
-        qx, qy = geo.closest_point_on_box_boundary_in_frame(
-            px, py, rot, px.new_tensor(self.package_length), px.new_tensor(self.package_width), gx, gy,
-        )
-        inside = distance < _hypot(px - qx, py - qy)
-        touching = _hypot(gx - qx, gy - qy) < GOAL_RADIUS + LINE_MIN_DIST
-        return distance.T, (inside | touching).T
+        q, _ = self.world.planar_state()  # landmarks first: the goal, then the packages
+        return self._status_kernel(q, self.n_packages, self.package_length, self.package_width)
 
     def _paint(self) -> None:
         for package, color in zip(self.packages, pk.package_colors(self.on_goal).unbind(1)):
@@ -176,21 +170,69 @@ class Scenario(BaseScenario):
         cached = self._obs_cache
         if cached is not None and cached[0] is pos and cached[1] is vel and cached[2] is self.on_goal:
             return cached[3]
-        n_packages, n_agents = self.n_packages, self.n_agents
-        packages, agents = pos[1 : 1 + n_packages].transpose(0, 1), pos[1 + n_packages :]  # [B, P, 2], [A, B, 2]
-        out = pos.new_empty(n_agents, pos.shape[1], OWN_BLOCK + PACKAGE_BLOCK * n_packages)
-        out[..., 0:2] = agents
-        out[..., 2:4] = vel[1 + n_packages :]
-        blocks = out[..., OWN_BLOCK:].view(n_agents, pos.shape[1], n_packages, PACKAGE_BLOCK)
-        blocks[..., 0:2] = packages - pos[0].unsqueeze(1)
-        blocks[..., 2:4] = packages.unsqueeze(0) - agents.unsqueeze(2)
-        blocks[..., 4:6] = vel[1 : 1 + n_packages].transpose(0, 1)
-        blocks[..., 6] = self.on_goal
+        out = self._observation_kernel(pos, vel, self.on_goal, self.n_packages)
         self._obs_cache = (pos, vel, self.on_goal, out)
         return out
 
     def done(self) -> torch.Tensor:
         return self.on_goal.all(dim=-1)
+
+
+def package_status(q: torch.Tensor, n_packages: int, length: float, width: float) -> tuple:
+    """Each package's distance to the goal and whether it overlaps it, both ``[B, P]``, from the planar state.
+
+    ``q`` ``[3, N, B]`` with the goal first, then the packages. The box
+    boundary is found in the box frame: the same test as
+    ``World.is_overlapping`` (the goal's centre closer to the package's than
+    the boundary point nearest it, or that point within the goal's reach),
+    equal to float rounding, in a fraction of the passes. A pure function of
+    tensors (run as a ``WorldKernel``).
+    """
+    px, py, rot = q[0, 1 : 1 + n_packages], q[1, 1 : 1 + n_packages], q[2, 1 : 1 + n_packages]
+    gx, gy = q[0, :1], q[1, :1]
+    distance = _hypot(px - gx, py - gy)
+    qx, qy = geo.closest_point_on_box_boundary_in_frame(px, py, rot, px.new_tensor(length), px.new_tensor(width), gx, gy)
+    inside = distance < _hypot(px - qx, py - qy)
+    touching = _hypot(gx - qx, gy - qy) < GOAL_RADIUS + LINE_MIN_DIST
+    return distance.T, (inside | touching).T
+
+
+def observations(pos: torch.Tensor, vel: torch.Tensor, on_goal: torch.Tensor, n_packages: int) -> torch.Tensor:
+    """Every agent's observation ``[A, B, obs]`` from the stacked state ``[N, B, 2]`` (goal, packages, agents).
+
+    A pure function of tensors (run as a ``WorldKernel``). Eagerly it is
+    written into one tensor block by block; compiled, the same columns are
+    concatenated (the compiler turns the strided block writes into one
+    scalar loop, 6x slower than its own concatenation, which is 2x faster
+    than the eager writes).
+    """
+    if torch.compiler.is_compiling():
+        return _observations_by_cat(pos, vel, on_goal, n_packages)
+    packages, agents = pos[1 : 1 + n_packages].transpose(0, 1), pos[1 + n_packages :]  # [B, P, 2], [A, B, 2]
+    n_agents, batch = agents.shape[:2]
+    out = pos.new_empty(n_agents, batch, OWN_BLOCK + PACKAGE_BLOCK * n_packages)
+    out[..., 0:2] = agents
+    out[..., 2:4] = vel[1 + n_packages :]
+    blocks = out[..., OWN_BLOCK:].view(n_agents, batch, n_packages, PACKAGE_BLOCK)
+    blocks[..., 0:2] = packages - pos[0].unsqueeze(1)
+    blocks[..., 2:4] = packages.unsqueeze(0) - agents.unsqueeze(2)
+    blocks[..., 4:6] = vel[1 : 1 + n_packages].transpose(0, 1)
+    blocks[..., 6] = on_goal
+    return out
+
+
+def _observations_by_cat(pos: torch.Tensor, vel: torch.Tensor, on_goal: torch.Tensor, n_packages: int) -> torch.Tensor:
+    """:func:`observations` as one concatenation of broadcast columns (the compiled layout)."""
+    packages, agents = pos[1 : 1 + n_packages], pos[1 + n_packages :]
+    n_agents, batch = agents.shape[:2]
+    per_package = (n_agents, batch, n_packages)
+    own = torch.cat([agents, vel[1 + n_packages :]], dim=-1)  # [A, B, 4]
+    from_goal = (packages - pos[0]).transpose(0, 1).unsqueeze(0).expand(*per_package, 2)
+    from_agent = (packages.unsqueeze(0) - agents.unsqueeze(1)).permute(0, 2, 1, 3)
+    package_vel = vel[1 : 1 + n_packages].transpose(0, 1).unsqueeze(0).expand(*per_package, 2)
+    delivered = on_goal.to(pos.dtype).unsqueeze(-1).unsqueeze(0).expand(*per_package, 1)
+    blocks = torch.cat([from_goal, from_agent, package_vel, delivered], dim=-1)  # [A, B, P, 7]
+    return torch.cat([own, blocks.flatten(2)], dim=-1)
 
 
 def _hypot(dx: torch.Tensor, dy: torch.Tensor) -> torch.Tensor:

@@ -155,8 +155,25 @@ def _gate(gap: Tensor, reach: Tensor, broad_phase: str) -> Tensor:
     """
     near = mask_le(gap, reach)
     if broad_phase == "batch":
-        near = near.amax(dim=1, keepdim=True)
+        near = near_in_any_env(near) if torch.compiler.is_compiling() else near.amax(dim=1, keepdim=True)
     return near
+
+
+@torch.library.custom_op("vmas_ros::near_in_any_env", mutates_args=())
+def near_in_any_env(near: Tensor) -> Tensor:
+    """``near.amax(dim=1, keepdim=True)`` as an op the compiler cannot fuse.
+
+    Fused into the contact kernel that consumes it, this one reduction across
+    the batch made inductor vectorise the whole kernel along the few pairs
+    instead of the many envs (box-sphere contacts at 10,000 envs: 790 us
+    compiled against 210 us eager); kept apart, the kernel runs along the envs.
+    """
+    return near.amax(dim=1, keepdim=True)
+
+
+@near_in_any_env.register_fake
+def _(near: Tensor) -> Tensor:
+    return near.new_empty(near.shape[0], 1)
 
 
 def _vectors(x: Tensor, y: Tensor) -> Tensor:
