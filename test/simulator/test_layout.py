@@ -6,7 +6,7 @@ import torch
 
 import vmas_ros
 
-from vmas_ros.simulator.layout import join_xy, split_xy, split_xy_stacked
+from vmas_ros.simulator.layout import join_xy, split_xy, split_xy_into, split_xy_stacked
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 SPECIAL = [0.0, -0.0, 1e-45, -1e-45, 3.4e38, -3.4e38, float("inf"), float("-inf"), float("nan"), 1.0, -2.5]
@@ -69,3 +69,17 @@ def test_state_written_between_steps_is_seen_by_the_next_step(device):
         # agent_0 was shifted by 0.5 in x before the second step (contacts aside, it ends ~0.5 further)
         assert (moved[0, :, 0] - untouched[0, :, 0]).abs().min() > 0.3
         assert not torch.allclose(moved[1], untouched[1])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_split_into_slots_copies_bits_exactly(device, dtype):
+    gen = torch.Generator().manual_seed(1)
+    values = torch.cat([torch.tensor(SPECIAL), torch.randn(501, generator=gen)])
+    vectors = torch.stack([values, values.flip(0)], dim=-1).reshape(4, -1, 2).to(device=device, dtype=dtype)
+    target = torch.full((3, 4, vectors.shape[1]), 7.0, device=device, dtype=dtype)
+    split_xy_into(vectors, target[:2])
+    view = torch.int64 if dtype == torch.float64 else torch.int32
+    assert torch.equal(target[0].view(view), vectors[..., 0].contiguous().view(view))
+    assert torch.equal(target[1].view(view), vectors[..., 1].contiguous().view(view))
+    assert (target[2] == 7.0).all(), "only the two slots are written"

@@ -54,6 +54,21 @@ def split_xy_stacked(vectors: Tensor) -> Tensor:
     return torch.stack(vectors.unbind(-1))
 
 
+def split_xy_into(vectors: Tensor, xy: Tensor) -> None:
+    """Write the components of ``[..., 2]`` ``vectors`` into ``xy`` ``[2, ...]`` (x then y), bit-exactly.
+
+    :func:`split_xy_stacked` without its output: the caller's rows are
+    filled directly (the 32-bit halves of each 64-bit pair are copied into
+    integer views of them), so no intermediate of the whole batch is kept.
+    """
+    if _bit_trick(vectors) and xy.dtype == torch.float32 and xy[0].is_contiguous() and xy[1].is_contiguous():
+        pairs = vectors.view(torch.int64).squeeze(-1)
+        xy[0].view(torch.int32).copy_(pairs)  # int64 -> int32 keeps the low 32 bits: x
+        xy[1].view(torch.int32).copy_(pairs >> 32)
+        return
+    xy.copy_(vectors.movedim(-1, 0))  # one copy: autograd sees a single write
+
+
 def join_xy(x: Tensor, y: Tensor) -> Tensor:
     """Contiguous ``[..., 2]`` vectors from components ``x``, ``y`` (bit-exact copies)."""
     if x.dtype in (torch.float32, torch.float64) and y.dtype == x.dtype and x.shape == y.shape:

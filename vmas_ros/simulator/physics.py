@@ -208,9 +208,18 @@ def step_planar(
             # held entities (landmarks) are one block at an end: integrate only the free block and
             # put the held rows back with one copy, instead of blending every row with 0/1 masks
             lo, hi = span
-            free_q, free_v = _integrate(q[:, lo:hi], v[:, lo:hi], force[:, lo:hi], c["free_block"], substep == 0)
-            q = torch.cat([q[:, :lo], free_q] if lo else [free_q, q[:, hi:]], dim=1)
-            v = torch.cat([v[:, :lo], free_v] if lo else [free_v, v[:, hi:]], dim=1)
+            if _differentiable(q, v, force):
+                free_q, free_v = _integrate(q[:, lo:hi], v[:, lo:hi], force[:, lo:hi], c["free_block"], substep == 0)
+                q = torch.cat([q[:, :lo], free_q] if lo else [free_q, q[:, hi:]], dim=1)
+                v = torch.cat([v[:, :lo], free_v] if lo else [free_v, v[:, hi:]], dim=1)
+                continue
+            # the free block integrates straight into its rows of the new state (no block-sized temporaries)
+            new_q, new_v = torch.empty_like(q), torch.empty_like(v)
+            held = slice(0, lo) if lo else slice(hi, None)
+            new_q[:, held], new_v[:, held] = q[:, held], v[:, held]
+            _integrate(q[:, lo:hi], v[:, lo:hi], force[:, lo:hi], c["free_block"], substep == 0,
+                       out=(new_q[:, lo:hi], new_v[:, lo:hi]))
+            q, v = new_q, new_v
             continue
         new_q, new_v = _integrate(q, v, force, c, substep == 0)
         if c["all_free"]:
@@ -226,13 +235,27 @@ def step_planar(
     return PlanarState(q, v)
 
 
-def _integrate(q: Tensor, v: Tensor, force: Tensor, c: dict, first_substep: bool) -> Tuple[Tensor, Tensor]:
-    """One semi-implicit Euler substep of the rows in ``q``/``v`` (``c``: their constants), limits applied."""
-    if first_substep:
-        v = v * c["keep"]
-    # v + force / mass * dt in VMAS's rounding (addition commutes exactly), in one fresh tensor:
-    # the in-place steps only touch the quotient, whose gradient needs neither it nor its inputs
-    new_v = (force / c["mass"]).mul_(c["sub_dt"]).add_(v)
+def _differentiable(*tensors: Tensor) -> bool:
+    """Whether autograd must see these (then no ``out=`` writes: they refuse tensors that need a gradient)."""
+    return torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+
+
+def _integrate(q: Tensor, v: Tensor, force: Tensor, c: dict, first_substep: bool,
+               out: Optional[Tuple[Tensor, Tensor]] = None) -> Tuple[Tensor, Tensor]:
+    """One semi-implicit Euler substep of the rows in ``q``/``v`` (``c``: their constants), limits applied.
+
+    ``out``: ``(q, v)`` slots to write the result into (the caller checked that no gradient is kept).
+    """
+    # (v * keep) + force / mass * dt in VMAS's rounding (addition commutes exactly)
+    if out is None:
+        # in one fresh tensor: the in-place steps only touch the quotient, whose gradient needs
+        # neither it nor its inputs
+        new_v = (force / c["mass"]).mul_(c["sub_dt"]).add_(v * c["keep"] if first_substep else v)
+    else:
+        # no temporaries: the quotient goes where the positions will, the damped velocity where the
+        # velocities will
+        quotient = torch.div(force, c["mass"], out=out[0]).mul_(c["sub_dt"])
+        new_v = (torch.mul(v, c["keep"], out=out[1]) if first_substep else out[1].copy_(v)).add_(quotient)
     if c["limits_speed"]:
         speed = contacts.norm(new_v[0], new_v[1])
         over = contacts.mask_gt(speed, c["max_speed"])
@@ -241,10 +264,17 @@ def _integrate(q: Tensor, v: Tensor, force: Tensor, c: dict, first_substep: bool
         new_v = torch.cat([contacts.select(over, limited, new_v[:2]), new_v[2:]])
     if c["limits_velocity"]:
         new_v = torch.clamp(new_v, -c["v_range"], c["v_range"])
-    new_q = (new_v * c["sub_dt"]).add_(q)
+    if out is None:
+        new_q = (new_v * c["sub_dt"]).add_(q)
+        if c["semidims"] is not None:
+            new_q = torch.clamp(new_q, -c["semidims"], c["semidims"])
+        return new_q, new_v
+    if new_v is not out[1]:  # a limit made a new tensor
+        out[1].copy_(new_v)
+    new_q = torch.mul(out[1], c["sub_dt"], out=out[0]).add_(q)
     if c["semidims"] is not None:
-        new_q = torch.clamp(new_q, -c["semidims"], c["semidims"])
-    return new_q, new_v
+        new_q.clamp_(-c["semidims"], c["semidims"])
+    return out
 
 
 def scatter_by_gemm(n_entities: int, n_pairs: int, batch: int) -> bool:

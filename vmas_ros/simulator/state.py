@@ -81,18 +81,21 @@ def _state_tensor(name: str, width: int, doc: str):
 def _stored_tensor(name: str, width: int, doc: str):
     """A [batch, width] field kept in the world's state store after a step (validated like _state_tensor).
 
-    The getter fetches the field from the store when the store has stepped
-    since the entity last held it (generation numbers); the setter keeps the
-    new tensor on the entity and tells the store that it is no longer the truth.
+    The entity holds a tensor of its own only when it was set since the
+    store's last step (its generation number equals the store's); otherwise
+    the getter returns the store's view, and keeps no reference to it: an
+    entity holding last step's view would keep last step's stacks alive (a
+    few MB at 30,000 envs). The setter keeps the new tensor on the entity and
+    tells the store that it is no longer the truth.
     """
     attr, gen_attr = "_" + name, "_" + name + "_gen"
 
     def fget(self):
         store = self._store
-        if self.__dict__[gen_attr] != store.gen:
-            self.__dict__[attr] = store.part(name, self._slot)
-            self.__dict__[gen_attr] = store.gen
-        return self.__dict__[attr]
+        if self.__dict__[gen_attr] == store.gen:
+            return self.__dict__[attr]
+        self.__dict__[attr] = None  # a tensor set before the last step: the step consumed it
+        return store.part(name, self._slot)
 
     def fset(self, value: Tensor) -> None:
         value = self._check_tensor(self._owner_name, name, value)
@@ -133,10 +136,18 @@ class EntityState(_Batched):
         self.__dict__["_" + name + "_gen"] = store.gen
         store.dirty = True
 
+    def _take_from_store(self) -> None:
+        """Own every field the store still holds for this entity (its current views become the entity's)."""
+        gen = self._store.gen
+        for name in STORED_FIELDS:
+            if self.__dict__["_" + name + "_gen"] != gen:
+                self.__dict__["_" + name] = self._store.part(name, self._slot)
+                self.__dict__["_" + name + "_gen"] = gen
+
     def _join(self, store: StateStore, slot: int) -> None:
         """Read from ``store`` at row ``slot`` from now on (the caller released the previous store)."""
+        self._take_from_store()
         for name in STORED_FIELDS:
-            getattr(self, name)  # take any stale field from the old store first
             self.__dict__["_" + name + "_gen"] = store.gen
         self._store, self._slot = store, slot
         store.dirty = True

@@ -277,7 +277,14 @@ class World(RayQueries, ActionInputs):
         if not entities:
             return
         store = self._store
-        state = physics.PlanarState(*store.planar()) if store.clean() else self._planar_from_entities(entities)
+        if store.clean():
+            state = physics.PlanarState(*store.planar())
+            store.drop_views()
+        else:
+            state = self._planar_from_entities(entities)
+        # what was stacked from the old state is stale once the step runs: freed before the step's
+        # own tensors are allocated (peak memory)
+        self._stacks, self._xy_splits = {}, {}
         actions = self._action_stack(tables, state.q)
         fixed_rotation = None
         if tables.joints is not None:
@@ -288,7 +295,6 @@ class World(RayQueries, ActionInputs):
                                   actions_writable=True)  # a fresh stack, ours to add into
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
-        self._stacks, self._xy_splits = {}, {}
         store.adopt(new.q, new.v)
         if self._dim_c > 0:
             for agent in self._agents:
