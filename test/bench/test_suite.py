@@ -1,8 +1,9 @@
 """The benchmark suite (``vmas-ros bench suite``): files, columns, ratios, targets,
 skipped workloads and option errors.
 
-The suite really runs once, at a tiny scale, through the command line; every
-other check reuses that run or feeds made-up rows to the report. Benchmarks are
+The suite really runs once, at a tiny scale, through the command line, and once
+more with both modes (eager and compiled: slow, it compiles); every other check
+reuses the first run, runs one tiny workload or feeds made-up rows to the report. Benchmarks are
 measurements, not timed tests: nothing here asserts on speed.
 """
 from __future__ import annotations
@@ -19,7 +20,14 @@ from PIL import Image
 
 from vmas_ros.bench import cli as bench_cli
 from vmas_ros.bench import suite
-from vmas_ros.bench.suite_report import SUITE_COLUMNS, TARGETS, evaluate_target, format_suite_table, summarize
+from vmas_ros.bench.suite_report import (
+    SUITE_COLUMNS,
+    TARGETS,
+    evaluate_target,
+    format_suite_table,
+    summarize,
+    write_suite_results,
+)
 
 HAS_VMAS = "vmas" in suite._mpe.available_peers()
 HAS_MPE = "mpe" in suite._mpe.available_peers()
@@ -229,6 +237,12 @@ def test_missing_peer_and_failing_workload_do_not_stop_the_suite(monkeypatch, ca
     (["--peers", "vmas", "gazebo"], "unknown peer(s) ['gazebo']; valid peers: ['vmas', 'mpe']"),
     (["--devices", "cuda"], "cpu only (issue 7); got devices ['cuda']; valid: cpu"),
     (["--num-envs", "7"], "--num-envs 7 is for 'bench mpe'"),
+    (["--modes", "eager", "compild"], "unknown mode(s) ['compild']; valid modes: eager, compiled"),
+    (["--compile-physics", "--modes", "eager", "compiled"],
+     "--compile-physics means --modes compiled, but --modes eager compiled was given too"),
+    (["--compile-physics", "--modes", "eager"], "but --modes eager was given too"),
+    (["--modes", "compiled", "--warmup", "0"], "needs --warmup >= 1 (the first run compiles), got 0"),
+    (["--compile-physics", "--warmup", "0"], "needs --warmup >= 1 (the first run compiles), got 0"),
 ])
 def test_bad_options_exit_2_naming_the_value(argv, needle, capsys, tmp_path):
     args = _parse(["suite"] + argv + ["--out", str(tmp_path / "never"), "--no-progress"])
@@ -246,3 +260,183 @@ def test_unknown_benchmark_lists_suite_and_run_suite_validates(capsys):
         suite.run_suite(["nope"], progress=False)
     with pytest.raises(ValueError, match="workloads must be a non-empty list"):
         suite.run_suite("spread_1", progress=False)
+
+
+# ------------------------------------------------------------------- modes
+def _modes_rows():
+    """spread_1 met by compiled only, spread_30k by both, transport_10k by neither, memory eager only, curves."""
+    c = dict(compiled=True)
+    return [
+        _row("spread_1", "vmas_ros", 1.0), _row("spread_1", "vmas_ros_compiled", 0.5, **c),
+        _row("spread_1", "vmas", 3.0),
+        _row("spread_30k", "vmas_ros", 1.0), _row("spread_30k", "vmas_ros_compiled", 0.5, **c),
+        _row("spread_30k", "vmas", 2.5),
+        _row("transport_10k", "vmas_ros", 1.0), _row("transport_10k", "vmas_ros_compiled", 0.8, **c),
+        _row("transport_10k", "vmas", 2.0),
+        _row("memory_30k", "vmas_ros", 1.0, 900.0, "memory"), _row("memory_30k", "vmas", 1.0, 1000.0, "memory"),
+        _row("scaling_envs", "vmas_ros", 0.2, env_steps_per_s=500.0),
+        _row("scaling_envs", "vmas_ros_compiled", 0.1, env_steps_per_s=1000.0, **c),
+        _row("scaling_envs", "vmas", 0.4, env_steps_per_s=250.0),
+        _row("scaling_agents", "vmas_ros", 1.0),
+        _row("scaling_agents", "vmas_ros_compiled", None, status="error", note="RuntimeError: no compiler", **c),
+        _row("scaling_agents", "vmas", 4.0),
+    ]
+
+
+def test_compiled_side_gets_its_own_ratio_and_met_by():
+    by = {e["workload"]: e for e in summarize(_modes_rows())}
+    spread_1, spread_30k, transport, memory = by["spread_1"], by["spread_30k"], by["transport_10k"], by["memory_30k"]
+    # peer is still VMAS, not the compiled side
+    assert {e["peer"] for e in by.values()} == {"vmas"}
+    assert spread_1["ratio"] == pytest.approx(3.0) and spread_1["compiled_ratio"] == pytest.approx(6.0)
+    assert spread_1["vmas_ros"] == pytest.approx(10.0) and spread_1["compiled"] == pytest.approx(5.0)
+    assert (spread_1["met"], spread_1["met_by"]) == (True, "compiled")  # 3x < 5x <= 6x
+    assert (spread_30k["met"], spread_30k["met_by"]) == (True, "eager")  # 2.5x and 5x, both >= 2x: eager named
+    assert transport["compiled_ratio"] == pytest.approx(2.5)
+    assert (transport["met"], transport["met_by"]) == (False, None)  # 2x and 2.5x, both < 3x
+    assert memory["compiled"] is None and memory["compiled_ratio"] is None and memory["compiled_status"] == "missing"
+    assert (memory["met"], memory["met_by"], memory["vmas_ros_mode"]) == (True, "eager", "eager")
+    envs = by["scaling_envs"]
+    assert envs["compiled_env_steps_per_s"] == 1000.0 and envs["compiled_ratio"] == pytest.approx(4.0)
+    agents = by["scaling_agents"]
+    assert agents["compiled"] is None and agents["compiled_ratio"] is None
+    assert agents["compiled_status"] == "error: RuntimeError: no compiler" and agents["ratio"] == pytest.approx(4.0)
+
+
+def test_table_with_compiled_columns():
+    text = format_suite_table(summarize(_modes_rows()))
+    lines = text.splitlines()
+    assert lines[0] == ("| workload | envs | agents | vmas_ros ms/step | VMAS ms/step | ratio | compiled ms/step | "
+                        "compiled ratio | target | met? |")
+    assert lines[1] == "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+    assert lines[2] == ("| spread_1 | 1 | 3 | 10.000 | 30.000 | 3.00x | 5.000 | 6.00x | >= 5x | "
+                        "✓ met (compiled only) |")
+    assert lines[3] == "| spread_30k | 1 | 3 | 10.000 | 25.000 | 2.50x | 5.000 | 5.00x | >= 2x | ✓ met (eager) |"
+    assert lines[4] == "| transport_10k | 1 | 3 | 10.000 | 20.000 | 2.00x | 8.000 | 2.50x | >= 3x | ✗ not met |"
+    assert lines[5] == "| memory_30k | 1 | 3 | 900 MB | 1,000 MB | 0.90x | - | - | <= 1x | ✓ met (eager) |"
+    assert ("| num_envs | vmas_ros ms/step | VMAS ms/step | vmas_ros env-steps/s | VMAS env-steps/s | speed-up | "
+            "compiled ms/step | compiled env-steps/s | compiled speed-up |") in lines
+    assert "| 1 | 2.000 | 4.000 | 500 | 250 | 2.00x | 1.000 | 1,000 | 4.00x |" in lines
+    assert "| agents | vmas_ros ms/step | VMAS ms/step | speed-up | compiled ms/step | compiled speed-up |" in lines
+    assert "| 3 | 10.000 | 40.000 | 4.00x | error: RuntimeError: no compiler | - |" in lines
+    assert "memory_30k is measured eager only" in text and "(compiled only) when only the compiled one" in text
+
+
+def test_table_without_compiled_rows_is_unchanged():
+    rows = [r for r in _modes_rows() if r["side"] != "vmas_ros_compiled"]
+    summary = summarize(rows)
+    assert all(e["compiled"] is None and e["compiled_status"] == "missing" for e in summary)
+    assert [e["met_by"] for e in summary[:4]] == [None, "eager", None, "eager"]
+    text = format_suite_table(summary)
+    assert text.splitlines()[:6] == [
+        "| workload | envs | agents | vmas_ros ms/step | VMAS ms/step | ratio | target | met? |",
+        "|---|---:|---:|---:|---:|---:|---:|---|",
+        "| spread_1 | 1 | 3 | 10.000 | 30.000 | 3.00x | >= 5x | ✗ not met |",
+        "| spread_30k | 1 | 3 | 10.000 | 25.000 | 2.50x | >= 2x | ✓ met |",
+        "| transport_10k | 1 | 3 | 10.000 | 20.000 | 2.00x | >= 3x | ✗ not met |",
+        "| memory_30k | 1 | 3 | 900 MB | 1,000 MB | 0.90x | <= 1x | ✓ met |",
+    ]
+    assert "| agents | vmas_ros ms/step | VMAS ms/step | speed-up |" in text.splitlines()
+    assert "compiled" not in text and "eager" not in text
+
+
+def test_compiled_only_is_the_vmas_ros_side_flagged_compiled():
+    rows = [_row("spread_1", "vmas_ros", 0.5, compiled=True), _row("spread_1", "vmas", 3.0)]
+    (entry,) = summarize(rows)
+    assert entry["vmas_ros"] == pytest.approx(5.0) and entry["ratio"] == pytest.approx(6.0)
+    assert (entry["vmas_ros_mode"], entry["met"], entry["met_by"]) == ("compiled", True, "compiled")
+    assert entry["compiled"] is None and entry["compiled_status"] == "missing"
+    lines = format_suite_table([entry]).splitlines()
+    assert lines[0] == "| workload | envs | agents | vmas_ros ms/step | VMAS ms/step | ratio | target | met? |"
+    assert lines[2] == "| spread_1 | 1 | 3 | 5.000 | 30.000 | 6.00x | >= 5x | ✓ met |"
+    assert lines[-1].startswith("vmas_ros ran compiled (--modes compiled")
+
+
+def test_modes_plan_the_sides_and_compile_physics_is_an_alias():
+    assert suite.resolve_modes(None) == ("eager",) and suite.resolve_modes(None, compile_physics=True) == ("compiled",)
+    assert suite.resolve_modes(["compiled", "eager", "compiled"]) == ("eager", "compiled")
+    assert suite.resolve_modes(["compiled"], compile_physics=True) == ("compiled",)
+    with pytest.raises(ValueError, match=r"unknown mode\(s\) \['jit'\]; valid modes: eager, compiled"):
+        suite.run_suite(["spread_1"], modes=["jit"], progress=False)
+    with pytest.raises(ValueError, match="--compile-physics means --modes compiled"):
+        suite.run_suite(["spread_1"], modes=["eager"], compile_physics=True, progress=False)
+    with pytest.raises(ValueError, match="modes must be a non-empty list"):
+        suite.resolve_modes("compiled")
+    units = {u.workload.name: u for u in suite.plan_suite(["spread_1", "memory_30k", "mpe_1k"], peers=["vmas", "mpe"],
+                                                          modes=("eager", "compiled"))}
+    assert units["spread_1"].sides[:2] == ["vmas_ros", "vmas_ros_compiled"]
+    assert units["spread_1"].compiled_sides == ("vmas_ros_compiled",)
+    assert units["mpe_1k"].compiled_sides == ("vmas_ros_compiled",)
+    assert units["memory_30k"].sides[0] == "vmas_ros" and units["memory_30k"].compiled_sides == ()
+    (only,) = suite.plan_suite(["spread_1"], peers=[], modes=("compiled",))
+    assert (only.sides, only.compiled_sides) == (["vmas_ros"], ("vmas_ros",))
+
+
+def test_a_failing_compiled_side_does_not_lose_the_others(monkeypatch, capsys):
+    real = suite._spheres_case
+
+    def spheres(side, n_agents, num_envs, steps, seed, compiled=False):
+        case = real(side, n_agents, num_envs, steps, seed, False)  # eager: no compiling in this test
+        if not compiled:
+            return case
+
+        def run():
+            raise RuntimeError("no C++ compiler")
+
+        return suite.Case(run=run, setup=case.setup, device="cpu")
+
+    monkeypatch.setattr(suite, "_spheres_case", spheres)
+    rows = suite.run_suite(["scaling_agents"], curve_agents=[2], steps=1, repeats=2, warmup=1, threads=1,
+                           peers=[], progress=False, modes=["eager", "compiled"])
+    assert [(r["side"], r["status"], r["compiled"]) for r in rows] == [
+        ("vmas_ros", "ok", False), ("vmas_ros_compiled", "error", True), ("vmas", "skipped", False)]
+    assert rows[0]["repeats"] == 2 and len(rows[0]["times_s"]) == 2
+    assert rows[1]["note"] == "RuntimeError: no C++ compiler" and "no C++ compiler" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_eager_and_compiled_side_by_side(tmp_path):
+    """One real run in both modes (torch.compile compiles in the warm-up: seconds)."""
+    argv = ["suite", "--workloads", "spread_1", "--modes", "eager", "compiled", "--steps", "2", "--repeats", "1",
+            "--warmup", "1", "--threads", "1", "--no-progress", "--no-plot", "--out", str(tmp_path)]
+    assert bench_cli.run_bench_command(_parse(argv)) == 0
+    document = json.loads((tmp_path / "suite.json").read_text())
+    assert document["modes"] == ["eager", "compiled"]
+    expected = [("vmas_ros", False), ("vmas_ros_compiled", True)] + ([("vmas", False)] if HAS_VMAS else [])
+    assert [(r["side"], r["compiled"]) for r in document["rows"]] == expected
+    for row in document["rows"]:
+        assert row["status"] == "ok" and row["num_envs"] == 1 and row["steps"] == 2 and row["median_s"] > 0
+    (entry,) = document["summary"]
+    compiled_row = document["rows"][1]
+    assert entry["compiled"] == pytest.approx(compiled_row["value"]) and entry["compiled_status"] == "ok"
+    if HAS_VMAS:
+        assert entry["compiled_ratio"] == pytest.approx(document["rows"][2]["median_s"] / compiled_row["median_s"])
+    text = (tmp_path / "suite.md").read_text()
+    assert "Modes measured: eager, compiled." in text
+    assert "| vmas_ros ms/step | VMAS ms/step | ratio | compiled ms/step | compiled ratio | target | met? |" in text
+    with open(tmp_path / "suite.csv", newline="") as handle:
+        assert [(line["side"], line["compiled"]) for line in csv.DictReader(handle)] == [
+            (side, str(flag)) for side, flag in expected]
+
+
+def _orange_pixels(path) -> int:
+    """Pixels of matplotlib's tab:orange (255, 127, 14), the compiled line's colour."""
+    with Image.open(path) as image:
+        pixels = np.asarray(image.convert("RGB")).astype(int)
+    return int((np.abs(pixels - [255, 127, 14]).sum(axis=-1) < 30).sum())
+
+
+def test_curve_plot_and_header_show_the_compiled_side(tmp_path):
+    pytest.importorskip("matplotlib")
+    rows = []
+    for n in (1, 10, 100):
+        for side, seconds in (("vmas_ros", 0.2), ("vmas_ros_compiled", 0.1), ("vmas", 0.4)):
+            rows.append(_row("scaling_envs", side, seconds * n, num_envs=n, n_agents=3, device="cpu", threads=1,
+                             repeats=3, min_s=seconds * n * 0.9, max_s=seconds * n * 1.1, per_step_ms=seconds * n * 10,
+                             env_steps_per_s=n * 100 / (seconds * n), compiled=side == "vmas_ros_compiled"))
+    both = write_suite_results(rows, tmp_path / "both")
+    eager = write_suite_results([r for r in rows if not r["compiled"]], tmp_path / "eager")
+    assert _orange_pixels(both["envs_png"]) > 50 and _orange_pixels(eager["envs_png"]) == 0
+    assert "Modes measured: eager, compiled." in both["md"].read_text()
+    assert "Modes measured: eager. vmas_ros eager (no torch.compile)." in eager["md"].read_text()
+    assert json.loads(both["json"].read_text())["modes"] == ["eager", "compiled"]

@@ -52,9 +52,13 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
                        help="suite: sphere counts of scaling_agents (default: 10 30 100 300 1000)")
     suite.add_argument("--max-peer-agents", type=int, default=None, metavar="N",
                        help="suite: run VMAS in scaling_agents only up to N agents; above, omitted (default 100)")
+    # no argparse choices: a bad mode exits 2 with the suite's own message, like its other options
+    suite.add_argument("--modes", nargs="+", default=None, metavar="MODE",
+                       help="suite: how vmas_ros is stepped: eager, compiled (physics through torch.compile, "
+                            "compiled during the warm-up runs, needs a C++ compiler) or both, timed side by side "
+                            "(default: eager; memory_30k is always eager)")
     suite.add_argument("--compile-physics", action="store_true",
-                       help="suite: run vmas_ros's physics step through torch.compile (World.compile_physics); "
-                            "compiled during the warm-up runs; memory_30k stays eager")
+                       help="suite: the same as --modes compiled (kept for older commands)")
     from vmas_ros.bench.node import add_node_bench_arguments
 
     add_node_bench_arguments(parser)

@@ -1,7 +1,8 @@
 """Names shared by the MPE benchmark (:mod:`vmas_ros.bench.mpe`) and its report
 (:mod:`vmas_ros.bench.report`): the scenario, the sides, their labels and the
 CSV columns. Re-exported by :mod:`vmas_ros.bench.mpe`. ``BENCHMARKS`` also names
-the suite (:mod:`vmas_ros.bench.suite`) and the node benchmark (:mod:`vmas_ros.bench.node`).
+the suite (:mod:`vmas_ros.bench.suite`) and the node benchmark (:mod:`vmas_ros.bench.node`);
+``COMPILED_SIDE`` is the suite's extra, compiled vmas_ros side.
 """
 from __future__ import annotations
 
@@ -11,7 +12,10 @@ SIDES = ("vmas_ros", "vmas", "mpe")
 PEERS = ("vmas", "mpe")
 _PEER_MODULE = {"vmas": "vmas", "mpe": "mpe2"}
 _PEER_INSTALL = {"vmas": "pip install vmas==1.5.2", "mpe": "pip install mpe2"}
-_LABEL = {"vmas_ros": "vmas_ros", "vmas": "VMAS", "mpe": "MPE"}
+#: the suite's (:mod:`vmas_ros.bench.suite`) vmas_ros side with its physics through torch.compile, measured
+#: next to the eager "vmas_ros" side by ``--modes eager compiled``; not one of SIDES (bench mpe has no such side)
+COMPILED_SIDE = "vmas_ros_compiled"
+_LABEL = {"vmas_ros": "vmas_ros", "vmas": "VMAS", "mpe": "MPE", COMPILED_SIDE: "vmas_ros compiled"}
 BENCHMARKS = ("mpe", "suite", "node")
 
 CSV_COLUMNS = [

@@ -22,6 +22,16 @@ How each side is measured, and why:
   other's peak RSS.
 * ``mpe_1k`` reuses the MPE case of :mod:`vmas_ros.bench.mpe` (MPE steps one env
   at a time, as in the VMAS paper; ``mpe_max_envs`` caps and extrapolates).
+* ``modes`` (``--modes eager compiled``) says how vmas_ros is stepped: eager,
+  or with its physics through torch.compile (``make_env(..., compile_physics=True)``,
+  ``World.compile_physics()``). With both, every timed point gets a second
+  vmas_ros side, ``vmas_ros_compiled``, built by the same code
+  (:mod:`vmas_ros.bench.suite_cases`) and timed in the same alternation as the
+  others, so eager, compiled and the peer meet the same machine noise. With
+  ``compiled`` alone (the old ``--compile-physics``) the one vmas_ros side is the
+  compiled one: ``side="vmas_ros"``, ``compiled=True``, as earlier results
+  files have it. Compiling happens in the warm-up runs (never timed);
+  ``memory_30k`` is always eager.
 * A workload whose scenario is not registered in ``vmas_ros.scenarios`` yet is
   reported as skipped rather than failing the run; upstream points above
   ``max_peer_agents`` are omitted (never extrapolated) and the report says so.
@@ -31,22 +41,19 @@ from __future__ import annotations
 import datetime as _dt
 import difflib
 import gc
-import importlib
-import json
 import math
-import os
 import statistics
-import subprocess
 import sys
 import traceback
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Callable, Dict, List, Mapping, Optional, Sequence
-
-import torch
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from vmas_ros.bench import mpe as _mpe
+from vmas_ros.bench.common import COMPILED_SIDE
 from vmas_ros.bench.report import plot_available
+from vmas_ros.bench.suite_cases import env_cases as _env_cases
+from vmas_ros.bench.suite_cases import memory_run as _memory_run
+from vmas_ros.bench.suite_cases import spheres_case as _spheres_case
 from vmas_ros.bench.suite_report import (
     format_suite_table,
     summarize,
@@ -54,12 +61,12 @@ from vmas_ros.bench.suite_report import (
 )
 from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
 
-__all__ = ["WORKLOADS", "Workload", "plan_suite", "run_suite", "run_suite_command", "validate_suite_options"]
+__all__ = ["MODES", "WORKLOADS", "Workload", "plan_suite", "resolve_modes", "run_suite", "run_suite_command",
+           "validate_suite_options"]
 
 SIDE, PEER_VMAS, PEER_MPE = "vmas_ros", "vmas", "mpe"
-SPHERE_RADIUS = 0.05
-#: spheres start uniform in a square of side SPHERE_SPACING * sqrt(n): constant density, ~80% covered, so many overlap
-SPHERE_SPACING = 0.1
+#: how vmas_ros can be stepped (``--modes``): eager, or its physics through torch.compile
+MODES = ("eager", "compiled")
 CURVE_AGENTS = (10, 30, 100, 300, 1000)
 CURVE_ENVS = (1, 10, 100, 1000, 10000, 30000)
 #: upstream VMAS buckets pairs in a Python loop with a host sync per pair: above this it takes minutes per step
@@ -97,13 +104,14 @@ WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
 
 @dataclass
 class Unit:
-    """One measured point: a workload at one num_envs (and agent count), both sides."""
+    """One measured point: a workload at one num_envs (and agent count), every side."""
 
     workload: Workload
     num_envs: int
     n_agents: Optional[int]
-    sides: List[str]  # sides to measure, vmas_ros first
+    sides: List[str]  # sides to measure: vmas_ros, then vmas_ros_compiled, then the peer
     skipped: Dict[str, str]  # side -> why it is not measured
+    compiled_sides: Tuple[str, ...] = ()  # the sides built with compile_physics=True
 
 
 # ----------------------------------------------------------------- options
@@ -121,9 +129,33 @@ def _positive_ints(name: str, values, allow_none: bool = True) -> None:
         raise ValueError(f"{name} must be positive integers; bad value(s): {bad}")
 
 
+def resolve_modes(modes: Optional[Sequence[str]] = None, compile_physics: bool = False) -> Tuple[str, ...]:
+    """The modes to measure, eager first, duplicates dropped; ValueError naming a bad one.
+
+    ``compile_physics=True`` is the old spelling of ``modes=("compiled",)`` and is kept so
+    existing commands and scripts still run; given with modes that say otherwise it is
+    an error rather than a silent choice of one of them.
+    """
+    if modes is None:
+        return ("compiled",) if compile_physics else ("eager",)
+    if isinstance(modes, str) or not isinstance(modes, Sequence) or not modes:
+        raise ValueError(f"modes must be a non-empty list of {', '.join(MODES)}, got {modes!r}")
+    bad = [m for m in modes if m not in MODES]
+    if bad:
+        raise ValueError(f"unknown mode(s) {bad}; valid modes: {', '.join(MODES)}")
+    resolved = tuple(m for m in MODES if m in modes)
+    if compile_physics and resolved != ("compiled",):
+        raise ValueError(f"--compile-physics means --modes compiled, but --modes {' '.join(modes)} was given too; "
+                         f"pass only one of them")
+    return resolved
+
+
 def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs, curve_agents,
-                           max_peer_agents, mpe_max_envs) -> None:
-    """Raise ValueError naming the bad value (and the valid ones) for any bad option."""
+                           max_peer_agents, mpe_max_envs, modes: Optional[Sequence[str]] = None,
+                           compile_physics: bool = False) -> Tuple[str, ...]:
+    """Raise ValueError naming the bad value (and the valid ones) for any bad option;
+    return the modes to measure (see :func:`resolve_modes`)."""
+    resolved = resolve_modes(modes, compile_physics)
     if workloads is not None:
         if isinstance(workloads, str) or not workloads:
             raise ValueError(f"workloads must be a non-empty list of names, got {workloads!r}")
@@ -146,6 +178,10 @@ def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, pe
         unknown = [p for p in ([peers] if isinstance(peers, str) else peers) if p not in _mpe.PEERS]
         if isinstance(peers, str) or unknown:
             raise ValueError(f"unknown peer(s) {unknown or [peers]}; valid peers: {list(_mpe.PEERS)}")
+    if "compiled" in resolved and warmup < 1:  # the first compiled run compiles for seconds: never time it
+        raise ValueError(f"the compiled mode (--modes compiled, --compile-physics) needs --warmup >= 1 (the first "
+                         f"run compiles), got {warmup}")
+    return resolved
 
 
 def _scenario_available(name: str) -> bool:
@@ -155,9 +191,23 @@ def _scenario_available(name: str) -> bool:
     return name in REGISTRY
 
 
+def _our_sides(kind: str, modes: Sequence[str]) -> Tuple[List[str], Tuple[str, ...]]:
+    """vmas_ros's sides for a workload kind and which of them are compiled.
+
+    Both modes: "vmas_ros" (eager) and "vmas_ros_compiled". Compiled alone: the one
+    "vmas_ros" side, compiled (as ``--compile-physics`` always wrote it). memory is eager only.
+    """
+    if kind == "memory" or "compiled" not in modes:
+        return [SIDE], ()
+    if "eager" not in modes:
+        return [SIDE], (SIDE,)
+    return [SIDE, COMPILED_SIDE], (COMPILED_SIDE,)
+
+
 def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, peers: Optional[Sequence[str]] = None,
                curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
-               max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS) -> List[Unit]:
+               max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS,
+               modes: Sequence[str] = ("eager",)) -> List[Unit]:
     """The points to measure, in workload order, with the reason for every side left out."""
     names = list(WORKLOADS) if workloads is None else list(dict.fromkeys(workloads))
     requested = set(_mpe.PEERS if peers is None else peers)
@@ -175,160 +225,39 @@ def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, pe
             points = [(n, None) for n in sorted({_scaled(n, scale) for n in (curve_envs or CURVE_ENVS)})]
         else:
             points = [(_scaled(w.num_envs, scale), w.n_agents or w.kwargs.get("n_agents"))]
+        ours, compiled = _our_sides(w.kind, modes)
         for num_envs, n_agents in points:
             skipped: Dict[str, str] = {}
             if w.scenario is not None and not _scenario_available(w.scenario):
-                skipped = {SIDE: "scenario not available", w.peer: "scenario not available"}
+                skipped = {side: "scenario not available" for side in ours + [w.peer]}
             elif peer_reason:
                 skipped[w.peer] = peer_reason
             elif w.kind == "agents_curve" and max_peer_agents is not None and n_agents > max_peer_agents:
                 skipped[w.peer] = (f"omitted: above --max-peer-agents {max_peer_agents} "
                                    f"(upstream is O(pairs) with host syncs; not extrapolated)")
-            sides = [s for s in (SIDE, w.peer) if s not in skipped]
-            units.append(Unit(w, num_envs, n_agents, sides, skipped))
+            sides = [s for s in ours + [w.peer] if s not in skipped]
+            units.append(Unit(w, num_envs, n_agents, sides, skipped, compiled))
     return units
 
 
-# ------------------------------------------------------------------- cases
-def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int, compile_physics: bool = False):
-    make = importlib.import_module("vmas_ros" if side == SIDE else "vmas").make_env
-    extra = {"compile_physics": True} if compile_physics and side == SIDE else {}
-    return make(scenario, num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed, **dict(kwargs), **extra)
-
-
-def _action_bounds(env) -> List[tuple]:
-    return [(torch.as_tensor(s.low), torch.as_tensor(s.high)) for s in env.action_space.spaces]
-
-
-def _random_actions(bounds, num_envs: int, steps: int, seed: int) -> List[List[torch.Tensor]]:
-    """``steps`` lists of one [num_envs, dim] tensor per agent, uniform in the bounds, from one seeded generator."""
-    generator = torch.Generator().manual_seed(seed)
-    return [[low + (high - low) * torch.rand(num_envs, low.numel(), generator=generator) for low, high in bounds]
-            for _ in range(steps)]
-
-
-def _env_cases(unit: Unit, steps: int, seed: int, compile_physics: bool = False) -> Dict[str, Case]:
-    """One env per side, the same actions for both (drawn in vmas_ros's action space)."""
-    w = unit.workload
-    envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed, compile_physics) for side in unit.sides}
-    first = envs[unit.sides[0]]
-    unit.n_agents = first.n_agents
-    dims = {side: [int(low.numel()) for low, _ in _action_bounds(env)] for side, env in envs.items()}
-    if len({tuple(d) for d in dims.values()}) > 1:
-        raise RuntimeError(f"{w.name}: the sides' action spaces differ: {dims}")
-    actions = _random_actions(_action_bounds(first), unit.num_envs, steps, seed)
-    cases = {}
-    for side, env in envs.items():
-        env.reset()
-
-        def run(env=env):
-            for action in actions:
-                env.step(action)
-
-        cases[side] = Case(run=run, setup=env.reset, device="cpu")
-    return cases
-
-
-def _spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int,
-                  compile_physics: bool = False) -> Case:
-    """``n_agents`` overlapping spheres built with the side's own World/Agent/Sphere; times World.step."""
-    core = importlib.import_module("vmas_ros.simulator.core" if side == SIDE else "vmas.simulator.core")
-    world = core.World(batch_dim=num_envs, device="cpu")
-    if compile_physics and side == SIDE:
-        world.compile_physics()
-    for i in range(n_agents):
-        world.add_agent(core.Agent(name=f"sphere_{i}", shape=core.Sphere(radius=SPHERE_RADIUS)))
-    world.reset(None)
-    generator = torch.Generator().manual_seed(seed)
-    pos = (torch.rand(n_agents, num_envs, 2, generator=generator) - 0.5) * (SPHERE_SPACING * math.sqrt(n_agents))
-    force = torch.rand(n_agents, num_envs, 2, generator=generator) * 2 - 1
-
-    def setup():  # the same start and action forces before every run, on both sides
-        for agent, p, f in zip(world.agents, pos, force):
-            agent.set_pos(p.clone(), batch_index=None)
-            agent.set_vel(torch.zeros(num_envs, 2), batch_index=None)
-            agent.state.force = f.clone()
-
-    def run():
-        for _ in range(steps):
-            world.step()
-
-    setup()
-    return Case(run=run, setup=setup, device="cpu")
-
-
+# -------------------------------------------------------------------- rows
 def _time_row(run_id: str, unit: Unit, side: str, steps: int, timing: Timing, measured_envs: int, loadavg) -> dict:
     """mpe.py's row (medians, extrapolation to num_envs), plus the suite's columns."""
     row = _mpe._row(run_id, side, "cpu", unit.num_envs, steps, timing, measured_envs, unit.num_envs, loadavg)
     row.update(scenario=unit.workload.scenario or "spheres", metric="time", value=row["per_step_ms"],
-               unit="ms/step", rss_mb=None, baseline_rss_mb=None)
+               unit="ms/step", rss_mb=None, baseline_rss_mb=None, compiled=side in unit.compiled_sides)
     return row
 
 
 def _other_row(run_id: str, unit: Unit, side: str, steps: int, threads: int, status: str, note: str) -> dict:
+    """A row without a measurement (``status`` skipped or error, ``note`` says why)."""
     return {"run_id": run_id, "scenario": unit.workload.scenario or "spheres", "side": side, "device": "cpu",
             "num_envs": unit.num_envs, "steps": steps, "repeats": 0, "threads": threads, "times_s": [],
-            "status": status, "note": note, "metric": "memory" if unit.workload.kind == "memory" else "time"}
+            "status": status, "note": note, "metric": "memory" if unit.workload.kind == "memory" else "time",
+            "compiled": side in unit.compiled_sides}
 
 
 # ------------------------------------------------------------------ memory
-# Peak RSS is the kernel's high-water mark (VmHWM). It is reset after the imports
-# (Linux /proc/self/clear_refs "5") so that a transient peak while importing torch
-# cannot hide the env's own use; elsewhere ru_maxrss since process start is used.
-_MEMORY_SCRIPT = r"""
-import gc, json, resource, sys, time
-import torch
-cfg = json.loads(sys.argv[1])
-torch.set_num_threads(cfg["threads"])
-from importlib import import_module
-make_env = import_module(cfg["module"]).make_env
-def status_mb(key):
-    try:
-        with open("/proc/self/status") as handle:
-            for line in handle:
-                if line.startswith(key + ":"):
-                    return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return peak / 2**20 if sys.platform == "darwin" else peak / 1024
-gc.collect()
-try:
-    with open("/proc/self/clear_refs", "w") as handle:
-        handle.write("5")
-except OSError:
-    pass
-baseline = status_mb("VmRSS")
-n = cfg["num_envs"]
-env = make_env(cfg["scenario"], num_envs=n, device="cpu", continuous_actions=True, seed=cfg["seed"], **cfg["kwargs"])
-env.reset()
-g = torch.Generator().manual_seed(cfg["seed"])
-bounds = [(torch.as_tensor(s.low), torch.as_tensor(s.high)) for s in env.action_space.spaces]
-start = time.perf_counter()
-for _ in range(cfg["steps"]):
-    env.step([lo + (hi - lo) * torch.rand(n, lo.numel(), generator=g) for lo, hi in bounds])
-seconds = time.perf_counter() - start
-print(json.dumps({"peak_rss_mb": status_mb("VmHWM"), "baseline_rss_mb": baseline, "seconds": seconds,
-                  "n_agents": env.n_agents}))
-"""
-
-
-def _memory_run(side: str, unit: Unit, steps: int, threads: int, seed: int) -> dict:
-    """Peak RSS (MiB) of a fresh interpreter that imports only torch and ``side``'s library and steps it."""
-    config = {"module": "vmas_ros" if side == SIDE else "vmas", "scenario": unit.workload.scenario,
-              "num_envs": unit.num_envs, "kwargs": dict(unit.workload.kwargs), "steps": steps, "threads": threads,
-              "seed": seed}
-    environ = dict(os.environ)
-    root = str(Path(importlib.import_module("vmas_ros").__file__).resolve().parent.parent)  # source checkouts too
-    environ["PYTHONPATH"] = os.pathsep.join(p for p in (root, environ.get("PYTHONPATH")) if p)
-    done = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT, json.dumps(config)], capture_output=True,
-                          text=True, env=environ, check=False)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
-    if done.returncode != 0 or not lines:
-        raise RuntimeError(f"memory subprocess for {side} failed (exit {done.returncode}): {done.stderr[-800:]}")
-    return json.loads(lines[-1])
-
-
 def _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run) -> List[dict]:
     results: Dict[str, List[dict]] = {side: [] for side in unit.sides}
     for index in range(repeats):  # alternate the sides, as time_alternating does
@@ -350,27 +279,53 @@ def _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run) -
 
 
 # ------------------------------------------------------------------ runner
+def _guarded(cases: Mapping[str, Case], failures: Dict[str, str]) -> Dict[str, Case]:
+    """``cases`` with every call wrapped: a side whose call raises (say torch.compile failing
+    in the warm-up) is recorded in ``failures`` and its later calls do nothing, so the
+    other sides are still timed, alternating as before, and only that side gets an error row."""
+    def wrap(side: str, fn: Optional[Callable[[], object]]) -> Optional[Callable[[], object]]:
+        if fn is None:
+            return None
+
+        def call():
+            if side in failures:
+                return None
+            try:
+                return fn()
+            except Exception as error:  # noqa: BLE001 - reported in the side's row, the run goes on
+                traceback.print_exc(file=sys.stderr)
+                failures[side] = f"{type(error).__name__}: {error}"
+                return None
+
+        return call
+
+    return {side: Case(run=wrap(side, case.run), setup=wrap(side, case.setup),
+                       warmup_run=wrap(side, case.warmup_run), device=case.device) for side, case in cases.items()}
+
+
 def _measure(unit: Unit, run_id: str, steps: int, repeats: int, warmup: int, threads: int, mpe_max_envs,
-             seed: int, on_run: Callable, compile_physics: bool = False) -> List[dict]:
+             seed: int, on_run: Callable) -> List[dict]:
+    """Rows of every side of ``unit``: time_alternating over all of them (memory: fresh processes)."""
     w, loadavg = unit.workload, _mpe._loadavg()
     if w.kind == "memory":  # no warm-up: each run is a fresh process, as a user's first run would be
         return _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run)
     measured = {side: unit.num_envs for side in unit.sides}
     if w.kind == "mpe":
-        cases = {SIDE: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps, compile_physics)}
+        cases = {side: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps, side in unit.compiled_sides)
+                 for side in unit.sides if side != PEER_MPE}
         if PEER_MPE in unit.sides:
             measured[PEER_MPE] = min(unit.num_envs, mpe_max_envs or unit.num_envs)
             cases[PEER_MPE] = _mpe._mpe_case(measured[PEER_MPE], steps, seed)
         unit.n_agents = _mpe.N_AGENTS
     elif w.kind in ("spheres", "agents_curve"):
-        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed, compile_physics)
+        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed, side in unit.compiled_sides)
                  for side in unit.sides}
     else:
-        cases = _env_cases(unit, steps, seed, compile_physics)
-    timings = time_alternating(cases, repeats=repeats, warmup=warmup, on_run=on_run)
-    rows = [_time_row(run_id, unit, side, steps, timings[side], measured[side], loadavg) for side in unit.sides]
-    for row in rows:
-        row["compiled"] = bool(compile_physics and row["side"] == SIDE)
+        cases = _env_cases(unit, steps, seed)
+    failures: Dict[str, str] = {}
+    timings = time_alternating(_guarded(cases, failures), repeats=repeats, warmup=warmup, on_run=on_run)
+    rows = [_other_row(run_id, unit, side, steps, threads, "error", failures[side]) if side in failures
+            else _time_row(run_id, unit, side, steps, timings[side], measured[side], loadavg) for side in unit.sides]
     del cases, timings
     return rows
 
@@ -379,19 +334,22 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
               scale: float = 1.0, threads: Optional[int] = None, peers: Optional[Sequence[str]] = None,
               curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
               max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS, mpe_max_envs: Optional[int] = None,
-              seed: int = 0, progress: bool = True, compile_physics: bool = False) -> List[dict]:
+              seed: int = 0, progress: bool = True, compile_physics: bool = False,
+              modes: Optional[Sequence[str]] = None) -> List[dict]:
     """Measure the chosen workloads (default all); one row per (workload, point, side).
 
     Every row has ``status``: ``ok``, ``skipped`` (``note`` says why: scenario not
     available, peer missing, above ``max_peer_agents``) or ``error`` (the exception,
     also printed on stderr; the other workloads still run). Raises ValueError for
     bad options. ``threads`` pins torch threads here and in the memory subprocesses.
-    ``compile_physics`` runs vmas_ros's physics step through torch.compile (compiled in
-    the warm-up runs, not timed; memory_30k stays eager).
+    ``modes`` (default ``("eager",)``) are how vmas_ros is stepped: with ``"compiled"``
+    its physics runs through torch.compile (compiled in the warm-up runs, not timed;
+    memory_30k stays eager); with both, compiled rows have ``side="vmas_ros_compiled"``.
+    ``compile_physics=True`` is the older spelling of ``modes=("compiled",)``.
     """
-    validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs, curve_agents,
-                           max_peer_agents, mpe_max_envs)
-    units = plan_suite(workloads, scale, peers, curve_envs, curve_agents, max_peer_agents)
+    modes = validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs,
+                                   curve_agents, max_peer_agents, mpe_max_envs, modes, compile_physics)
+    units = plan_suite(workloads, scale, peers, curve_envs, curve_agents, max_peer_agents, modes)
     run_id = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     from tqdm import tqdm
 
@@ -414,8 +372,7 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
             measured: List[dict] = []
             if unit.sides:
                 try:
-                    measured = _measure(unit, run_id, steps, repeats, warmup, in_effect, mpe_max_envs, seed, on_run,
-                                        compile_physics)
+                    measured = _measure(unit, run_id, steps, repeats, warmup, in_effect, mpe_max_envs, seed, on_run)
                 except Exception as error:  # one broken workload must not lose an hour of others
                     traceback.print_exc(file=sys.stderr)
                     message = f"{type(error).__name__}: {error}"
@@ -425,7 +382,7 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
                 row.setdefault("status", "ok")
                 row.setdefault("note", "")
             skipped = [_other_row(run_id, unit, s, steps, in_effect, "skipped", why) for s, why in unit.skipped.items()]
-            for row in sorted(measured + skipped, key=lambda r: r["side"] != SIDE):
+            for row in sorted(measured + skipped, key=lambda r: {SIDE: 0, COMPILED_SIDE: 1}.get(r["side"], 2)):
                 row.update(workload=unit.workload.name, n_agents=unit.n_agents)
                 rows.append(row)
             gc.collect()
@@ -442,7 +399,8 @@ def run_suite_command(args) -> int:
         warmup=getattr(args, "warmup", 1), scale=getattr(args, "scale", 1.0), threads=getattr(args, "threads", None),
         peers=getattr(args, "peers", None), curve_envs=getattr(args, "curve_envs", None),
         curve_agents=getattr(args, "curve_agents", None), mpe_max_envs=getattr(args, "mpe_max_envs", None),
-        max_peer_agents=getattr(args, "max_peer_agents", None),
+        max_peer_agents=getattr(args, "max_peer_agents", None), modes=getattr(args, "modes", None),
+        compile_physics=bool(getattr(args, "compile_physics", False)),
     )
     if options["max_peer_agents"] is None:
         options["max_peer_agents"] = DEFAULT_MAX_PEER_AGENTS
@@ -459,11 +417,7 @@ def run_suite_command(args) -> int:
         print(f"vmas-ros bench suite: {error}", file=sys.stderr)
         return 2
     plot = plot_available(not getattr(args, "no_plot", False))
-    compile_physics = bool(getattr(args, "compile_physics", False))
-    if compile_physics and options["warmup"] < 1:
-        print("vmas-ros bench suite: --compile-physics needs --warmup >= 1 (the first run compiles)", file=sys.stderr)
-        return 2
-    rows = run_suite(progress=not getattr(args, "no_progress", False), compile_physics=compile_physics, **options)
+    rows = run_suite(progress=not getattr(args, "no_progress", False), **options)
     paths = write_suite_results(rows, getattr(args, "out", "bench_results"), plot=plot)
     print(format_suite_table(summarize(rows)))
     print()

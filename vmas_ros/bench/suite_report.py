@@ -4,6 +4,13 @@ issue's targets, the markdown tables, the two plots and the files in ``--out``.
 Kept apart from the runner so a report can be rebuilt from saved or synthetic
 rows (the tests feed it rows they made up to check the met/not-met logic).
 Ratios are always ratios of the medians of one run, never of different runs.
+
+With ``--modes eager compiled`` a point has up to three sides: ``vmas_ros``
+(eager), ``vmas_ros_compiled`` and the peer. Each vmas_ros side gets its own
+ratio against the peer, and a target counts as met when either ratio meets it
+(``met_by`` says which; eager is named when both do), because the compiled
+path is a supported way to run vmas_ros, not a different library. Without
+compiled rows every table is exactly what it was before modes existed.
 """
 from __future__ import annotations
 
@@ -11,11 +18,11 @@ import json
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
-from vmas_ros.bench.common import _LABEL
+from vmas_ros.bench.common import _LABEL, COMPILED_SIDE
 from vmas_ros.bench.report import machine_info, write_csv
 
-__all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "summarize",
-           "write_suite_results"]
+__all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "measured_modes",
+           "summarize", "write_suite_results"]
 
 #: issue 7's targets: (op, value) on the ratio. Time: peer / vmas_ros (speed-up, higher
 #: is better). Memory: vmas_ros / peer peak RSS (lower is better).
@@ -32,6 +39,8 @@ TARGETS: Dict[str, Tuple[str, float]] = {
 }
 #: curve workloads and the variable on their x axis
 CURVES = {"scaling_envs": "num_envs", "scaling_agents": "n_agents"}
+#: the sides that are vmas_ros (eager or compiled); any other side of a point is its peer
+OURS = ("vmas_ros", COMPILED_SIDE)
 
 SUITE_COLUMNS = [
     "run_id", "workload", "scenario", "side", "status", "note", "device", "num_envs", "n_agents", "steps",
@@ -62,25 +71,38 @@ def _status(row: Optional[dict]) -> str:
     return f"{row['status']}: {row.get('note', '')}".rstrip(": ")
 
 
+def _ratio_of(ours: dict, theirs: dict, metric: str) -> float:
+    """Memory: ours / theirs peak RSS (lower is better); time: theirs / ours median (a speed-up)."""
+    return ours["value"] / theirs["value"] if metric == "memory" else theirs["median_s"] / ours["median_s"]
+
+
 def summarize(rows: Sequence[dict], targets: Mapping[str, Tuple[str, float]] = TARGETS) -> List[dict]:
     """One entry per measured point (workload, num_envs, n_agents) of each run, in row order:
-    both sides' values, the ratio of their medians, the target and whether it is met."""
+    every side's value, the ratios of their medians, the target and whether it is met.
+
+    ``vmas_ros`` is the value of the side named vmas_ros (eager, or compiled when only
+    compiled was measured: ``vmas_ros_mode`` says which); ``compiled`` that of
+    ``vmas_ros_compiled``. ``met`` is the target checked on the better of ``ratio`` and
+    ``compiled_ratio`` (memory: ``ratio`` only, it is measured eager) and ``met_by`` the
+    mode that met it, "eager" when both do, None when not met."""
     groups: Dict[tuple, Dict[str, dict]] = {}
     for row in rows:
         key = (row["run_id"], row["workload"], row["num_envs"], row.get("n_agents"))
         groups.setdefault(key, {})[row["side"]] = row
     summary = []
     for (run_id, workload, num_envs, n_agents), sides in groups.items():
-        ours = sides.get("vmas_ros")
-        peer_name = next((side for side in sides if side != "vmas_ros"), "vmas")
+        ours, comp = sides.get("vmas_ros"), sides.get(COMPILED_SIDE)
+        peer_name = next((side for side in sides if side not in OURS), "vmas")
         theirs = sides.get(peer_name)
-        ours_ok, theirs_ok = _status(ours) == "ok", _status(theirs) == "ok"
-        metric = (ours or theirs)["metric"]
-        ratio = None
-        if ours_ok and theirs_ok:
-            ratio = (ours["value"] / theirs["value"] if metric == "memory"
-                     else theirs["median_s"] / ours["median_s"])
+        ours_ok, comp_ok, theirs_ok = (_status(r) == "ok" for r in (ours, comp, theirs))
+        metric = (ours or comp or theirs)["metric"]
+        ratio = _ratio_of(ours, theirs, metric) if ours_ok and theirs_ok else None
+        compiled_ratio = _ratio_of(comp, theirs, metric) if comp_ok and theirs_ok else None
         target = None if workload in CURVES else targets.get(workload)
+        mode = None if ours is None else "compiled" if ours.get("compiled") else "eager"
+        met_eager = evaluate_target(ratio, target)
+        met_compiled = None if metric == "memory" else evaluate_target(compiled_ratio, target)
+        met = True if True in (met_eager, met_compiled) else False if False in (met_eager, met_compiled) else None
         summary.append({
             "run_id": run_id, "workload": workload, "num_envs": num_envs, "n_agents": n_agents, "metric": metric,
             "unit": "MB" if metric == "memory" else "ms/step", "peer": peer_name,
@@ -93,65 +115,99 @@ def summarize(rows: Sequence[dict], targets: Mapping[str, Tuple[str, float]] = T
             "ratio": ratio,
             "ratio_kind": "vmas_ros / peer peak RSS" if metric == "memory" else "peer time / vmas_ros time",
             "target": None if target is None else f"{target[0]} {target[1]:g}x",
-            "met": evaluate_target(ratio, target),
+            "met": met,
+            "met_by": mode if met_eager else "compiled" if met_compiled else None,
             "status": _status(ours), "peer_status": _status(theirs),
             "peer_extrapolated": bool(theirs.get("extrapolated")) if theirs_ok else False,
+            "vmas_ros_mode": mode,
+            "compiled": comp["value"] if comp_ok else None,
+            "compiled_env_steps_per_s": comp.get("env_steps_per_s") if comp_ok else None,
+            "compiled_status": _status(comp),
+            "compiled_ratio": compiled_ratio,
         })
     return summary
 
 
 # ------------------------------------------------------------------- table
+#: per side of an entry: its value, status and baseline-RSS keys
+_KEYS = {"vmas_ros": ("vmas_ros", "status", "vmas_ros_baseline_mb"), "compiled": ("compiled", "compiled_status", None),
+         "peer": ("peer_value", "peer_status", "peer_baseline_mb")}
+
+
+def _has_compiled(entries: Sequence[dict]) -> bool:
+    """Any entry with a vmas_ros_compiled side (measured, skipped or failed): then the compiled columns show."""
+    return any(e.get("compiled_status", "missing") != "missing" for e in entries)
+
+
 def _value(entry: dict, side: str) -> str:
-    """A median with its unit, or why there is none (a reason shared by both sides is shown once)."""
-    value = entry["vmas_ros" if side == "vmas_ros" else "peer_value"]
-    status = entry["status" if side == "vmas_ros" else "peer_status"]
+    """A median with its unit, or why there is none (a reason shared with vmas_ros is shown once)."""
+    value_key, status_key, base_key = _KEYS[side]
+    value, status = entry.get(value_key), entry.get(status_key, "missing")
     if value is None:
         if status in ("ok", "missing") or (side != "vmas_ros" and status == entry["status"]):
             return "-"
         return "omitted" if "omitted" in status else status
     if entry["unit"] == "MB":  # peak, and how much of it came after the imports
-        base = entry["vmas_ros_baseline_mb" if side == "vmas_ros" else "peer_baseline_mb"]
+        base = entry.get(base_key) if base_key else None
         return f"{value:,.0f} MB" + ("" if base is None else f" (+{value - base:,.0f})")
     text = (f"{value:.3f}" if value < 100 else f"{value:,.1f}")
-    return text + ("\\*" if side != "vmas_ros" and entry["peer_extrapolated"] else "")
+    return text + ("\\*" if side == "peer" and entry["peer_extrapolated"] else "")
 
 
-def _ratio(entry: dict) -> str:
-    if entry["ratio"] is None:
+def _ratio(entry: dict, key: str = "ratio") -> str:
+    if entry.get(key) is None:
         return "-"
-    return f"{entry['ratio']:.2f}x" + ("\\*" if entry["peer_extrapolated"] else "")
+    return f"{entry[key]:.2f}x" + ("\\*" if entry["peer_extrapolated"] else "")
 
 
-def _met(entry: dict) -> str:
+def _met(entry: dict, by_mode: bool = False) -> str:
+    """The met? cell; ``by_mode`` (tables with compiled columns) adds which mode met the target."""
     if entry["target"] is None:
         return "-"
+    if by_mode and entry["met"]:
+        return "✓ met (eager)" if entry.get("met_by") == "eager" else "✓ met (compiled only)"
     return {True: "✓ met", False: "✗ not met", None: "n/a"}[entry["met"]]
 
 
+def _header(head: List[str], left: Sequence[int]) -> List[str]:
+    """A markdown header row and its alignment row (columns in ``left`` left-aligned, the rest right)."""
+    return ["| " + " | ".join(head) + " |",
+            "|" + "|".join("---" if i in left else "---:" for i in range(len(head))) + "|"]
+
+
 def _main_table(entries: List[dict]) -> List[str]:
-    head = ["workload", "envs", "agents", "vmas_ros ms/step", "VMAS ms/step", "ratio", "target", "met?"]
-    lines = ["| " + " | ".join(head) + " |", "|---|---:|---:|---:|---:|---:|---:|---|"]
+    compiled = _has_compiled(entries)
+    head = ["workload", "envs", "agents", "vmas_ros ms/step", "VMAS ms/step", "ratio"]
+    head += ["compiled ms/step", "compiled ratio"] if compiled else []
+    lines = _header(head + ["target", "met?"], left=(0, len(head) + 1))
     for e in entries:
         name = e["workload"] + (f" (vs {_LABEL.get(e['peer'], e['peer'])})" if e["peer"] != "vmas" else "")
         cells = [name, str(e["num_envs"]), "-" if e["n_agents"] is None else str(e["n_agents"]),
-                 _value(e, "vmas_ros"), _value(e, "peer"), _ratio(e), e["target"] or "-", _met(e)]
-        lines.append("| " + " | ".join(cells) + " |")
+                 _value(e, "vmas_ros"), _value(e, "peer"), _ratio(e)]
+        cells += [_value(e, "compiled"), _ratio(e, "compiled_ratio")] if compiled else []
+        lines.append("| " + " | ".join(cells + [e["target"] or "-", _met(e, compiled)]) + " |")
     return lines
 
 
 def _curve_table(workload: str, entries: List[dict]) -> List[str]:
-    x = CURVES[workload]
+    x, compiled = CURVES[workload], _has_compiled(entries)
     if x == "num_envs":
         head = ["num_envs", "vmas_ros ms/step", "VMAS ms/step", "vmas_ros env-steps/s", "VMAS env-steps/s", "speed-up"]
+        head += ["compiled ms/step", "compiled env-steps/s", "compiled speed-up"] if compiled else []
     else:
         head = ["agents", "vmas_ros ms/step", "VMAS ms/step", "speed-up"]
-    lines = [f"### {workload}", "", "| " + " | ".join(head) + " |", "|" + "|".join("---:" for _ in head) + "|"]
+        head += ["compiled ms/step", "compiled speed-up"] if compiled else []
+    lines = [f"### {workload}", "", *_header(head, left=())]
     for e in entries:
         cells = [str(e[x]), _value(e, "vmas_ros"), _value(e, "peer")]
-        if x == "num_envs":
-            cells += ["-" if e[k] is None else f"{e[k]:,.0f}"
-                      for k in ("vmas_ros_env_steps_per_s", "peer_env_steps_per_s")]
-        lines.append("| " + " | ".join(cells + [_ratio(e)]) + " |")
+        keys = ("vmas_ros_env_steps_per_s", "peer_env_steps_per_s") if x == "num_envs" else ()
+        cells += ["-" if e[k] is None else f"{e[k]:,.0f}" for k in keys] + [_ratio(e)]
+        if compiled:
+            cells.append(_value(e, "compiled"))
+            if x == "num_envs":
+                cells.append("-" if e["compiled_env_steps_per_s"] is None else f"{e['compiled_env_steps_per_s']:,.0f}")
+            cells.append(_ratio(e, "compiled_ratio"))
+        lines.append("| " + " | ".join(cells) + " |")
     return lines
 
 
@@ -169,6 +225,15 @@ def format_suite_table(summary: Sequence[dict]) -> str:
               "VMAS peak RSS for memory_30k (MB, each side in a fresh process; (+N): the part above the RSS "
               "after importing torch and the library). Sides alternate inside each repeat; ratios are of the "
               "medians of this run."]
+    if _has_compiled(summary):
+        lines.append("compiled: vmas_ros with its physics through torch.compile (--modes eager compiled), built like "
+                     "the eager side and timed alternating with it and the peer; it compiles during the warm-up runs, "
+                     "which are not timed. compiled ratio: peer median time / compiled median time. met?: the target "
+                     "checked on the better of the two ratios: (eager) when the eager ratio meets it (also when both "
+                     "do), (compiled only) when only the compiled one does. memory_30k is measured eager only.")
+    elif any(e.get("vmas_ros_mode") == "compiled" for e in summary):
+        lines.append("vmas_ros ran compiled (--modes compiled: physics through torch.compile, compiled during the "
+                     "warm-up runs); memory_30k is measured eager only.")
     if any(e["peer_extrapolated"] for e in summary):
         lines.append("\\* MPE was stepped for fewer envs (--mpe-max-envs) and its time scaled linearly.")
     omitted = sorted({e["n_agents"] for e in summary if e["peer_status"].startswith("skipped: omitted")})
@@ -197,13 +262,14 @@ def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> 
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 
-    colors = {"vmas_ros": "tab:green", "vmas": "tab:blue"}
+    colors = {"vmas_ros": "tab:green", COMPILED_SIDE: "tab:orange", "vmas": "tab:blue"}
     steps = ok[0]["steps"]
     fig, ax = plt.subplots(figsize=(8, 5), dpi=110)
-    for side in ("vmas_ros", "vmas"):
+    for side in ("vmas_ros", COMPILED_SIDE, "vmas"):
         line = sorted((r for r in ok if r["side"] == side), key=lambda r: r[x_key])
         if not line:
             continue
+        style = COMPILED_SIDE if side in OURS and all(r.get("compiled") for r in line) else side  # --modes compiled
         xs = [r[x_key] for r in line]
         if x_key == "num_envs":  # throughput: higher is better
             ys = [r["env_steps_per_s"] for r in line]
@@ -213,8 +279,8 @@ def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> 
             ys = [r["per_step_ms"] for r in line]
             low = [r["min_s"] / steps * 1e3 for r in line]
             high = [r["max_s"] / steps * 1e3 for r in line]
-        ax.plot(xs, ys, marker="o", color=colors[side], label=f"{_LABEL[side]} (CPU)")
-        ax.vlines(xs, low, high, color=colors[side], alpha=0.5)
+        ax.plot(xs, ys, marker="o", color=colors[style], label=f"{_LABEL[style]} (CPU)")
+        ax.vlines(xs, low, high, color=colors[style], alpha=0.5)
     omitted = sorted(r[x_key] for r in rows if r["workload"] == workload and "omitted" in (r.get("note") or ""))
     if omitted:
         ax.plot([], [], linestyle="none", label=f"VMAS omitted at {', '.join(map(str, omitted))} (not extrapolated)")
@@ -244,6 +310,23 @@ def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> 
 
 
 # ------------------------------------------------------------------- files
+def measured_modes(rows: Sequence[dict]) -> List[str]:
+    """The modes vmas_ros was run in (eager first), from the rows' ``compiled`` flags; memory
+    rows are left out because memory is always eager, whatever the modes."""
+    ours = [r for r in rows if r["side"] in OURS and r.get("metric") != "memory"]
+    return [mode for mode, present in (("eager", any(not r.get("compiled") for r in ours)),
+                                       ("compiled", any(r.get("compiled") for r in ours))) if present]
+
+
+_MODES_LINE = {
+    ("eager",): "vmas_ros eager (no torch.compile).",
+    ("compiled",): "vmas_ros compiled: physics through torch.compile (`--modes compiled`, or `--compile-physics`; "
+                   "memory_30k eager).",
+    ("eager", "compiled"): "vmas_ros measured in both modes, eager and compiled (physics through torch.compile), "
+                           "timed side by side in every repeat (`--modes eager compiled`; memory_30k eager only).",
+}
+
+
 def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str, Path]:
     """Write ``suite.csv`` (one row per workload point and side, every repeat), ``suite.json``
     (rows, summary, machine info), ``suite.md`` and, with ``plot``, ``suite_envs.png`` /
@@ -265,15 +348,17 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
         "baseline_rss_mb is its RSS after the imports. For the other rows peak_rss_mb is this process's "
         "high-water mark when the point ended, both sides together.",
         "mpe_1k: MPE (mpe2) steps one env at a time, as in the VMAS paper; vmas_ros uses its own random actions.",
+        "Modes: compiled rows (compiled=true) ran vmas_ros's physics through torch.compile, compiled during the "
+        "untimed warm-up runs; with both modes their side is vmas_ros_compiled. memory_30k is measured eager only.",
     ]
-    document = {"benchmark": "suite", "machine": info, "targets": {k: list(v) for k, v in TARGETS.items()},
-                "notes": notes, "rows": rows, "summary": summary}
+    modes = measured_modes(rows)
+    document = {"benchmark": "suite", "machine": info, "modes": modes,
+                "targets": {k: list(v) for k, v in TARGETS.items()}, "notes": notes, "rows": rows, "summary": summary}
     with open(paths["json"], "w", encoding="utf-8") as handle:
         json.dump(document, handle, indent=2, allow_nan=False)
-    compiled = any(r.get("compiled") for r in rows)
     header = ("# Benchmark suite: vmas_ros vs VMAS 1.5.2 (issue 7)\n\n"
-              + ("vmas_ros physics compiled with torch.compile (`--compile-physics`; memory_30k eager).\n\n"
-                 if compiled else "vmas_ros eager (no torch.compile).\n\n")
+              + f"Modes measured: {', '.join(modes) or 'none'}. "
+              + _MODES_LINE.get(tuple(modes), "") + "\n\n"
               + _title(info, f"{'/'.join(map(str, sorted({r['steps'] for r in rows})))} steps per run").replace(
                   "\n", ". ") + "\n\n")
     paths["md"].write_text(header + format_suite_table(summary) + "\n", encoding="utf-8")
