@@ -199,3 +199,26 @@ def test_set_positions_equals_setting_each_entity_and_keeps_the_state_clean(devi
     assert torch.equal(batched.stacked_state("pos"), single.stacked_state("pos"))
     with pytest.raises(ValueError, match="2 entities but x"):
         batched.set_positions(batched.agents[:2], x[:1], y[:1])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_state_kernels_run_with_the_step_once_per_state(device):
+    world = _world(device)
+    calls = []
+
+    def centre(q, v):
+        calls.append(1)
+        return q[:2].mean(dim=1), v[2].abs().sum(dim=0)
+
+    handle = world.add_state_kernel(centre)
+    assert world.take_state_kernel_output(handle) is None, "no step yet"
+    world.step()
+    assert len(calls) == 1
+    got = world.take_state_kernel_output(handle)
+    q, v = world.planar_state()
+    assert torch.equal(got[0], q[:2].mean(dim=1)) and torch.equal(got[1], v[2].abs().sum(dim=0))
+    assert world.take_state_kernel_output(handle) is None, "handed out once: a second reader computes its own"
+    world.step()
+    world.agents[0].set_pos(torch.zeros(4, 2, device=device), batch_index=None)
+    assert world.take_state_kernel_output(handle) is None, "the state changed after the step"
+    assert len(calls) == 2

@@ -25,6 +25,10 @@ from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
 __all__ = ["Environment"]
 
 
+#: up to this many action elements (agents x envs x components) the range check clamps and compares
+FEW_ACTION_ELEMENTS = 4096
+
+
 def _is_one(u_multiplier) -> bool:
     values = u_multiplier if isinstance(u_multiplier, (list, tuple)) else [u_multiplier]
     return all(float(v) == 1 for v in values)
@@ -212,13 +216,12 @@ class Environment:
         return plans
 
     def _set_actions(self, actions: list) -> None:
-        tensors, names = [], []
+        tensors = []
         for agent, action, plan in zip(self.agents, actions, self._action_plans()):
             action = act.to_action_tensor(action, agent.name, self.num_envs, plan[0], self.device, self.continuous_actions)
-            if not self.grad_enabled:
+            if not self.grad_enabled and action.requires_grad:
                 action = action.detach()
             tensors.append(action)
-            names.append(agent.name)
         if not tensors:  # every agent is scripted
             return
         lows, highs = self._stacked_bounds()
@@ -234,21 +237,25 @@ class Environment:
                 # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
                 if not bool(torch.isfinite(stacked).all()):
                     unbounded = [torch.full_like(low, float("inf")) for low in lows]
-                    act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, names, kind)
+                    act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
                 stacked = torch.clamp(stacked, low, high)
                 tensors = list(stacked.unbind(0))
+            elif stacked.numel() <= FEW_ACTION_ELEMENTS:
+                # few: two calls (clamping changes something, or meets a NaN, exactly when an action is out)
+                if not torch.equal(torch.clamp(stacked, low, high), stacked):
+                    act.check_finite_and_range(tensors, lows, highs, [a.name for a in self.agents], kind)
             else:
                 # the extremes over the batch against the bounds: one pass over the actions (NaN
                 # propagates through min/max and fails both comparisons)
                 smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
                 if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
-                    act.check_finite_and_range(tensors, lows, highs, names, kind)
+                    act.check_finite_and_range(tensors, lows, highs, [a.name for a in self.agents], kind)
         elif self.clamp_action and self.continuous_actions:
             unbounded = [torch.full_like(low, float("inf")) for low in lows]
-            act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, names, kind)
+            act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
             tensors = [torch.maximum(torch.minimum(a.float(), high), low) for a, low, high in zip(tensors, lows, highs)]
         else:
-            act.check_finite_and_range(tensors, lows, highs, names, kind)
+            act.check_finite_and_range(tensors, lows, highs, [a.name for a in self.agents], kind)
         for agent, action, plan in zip(self.agents, tensors, self._action_plans()):
             self._apply_action(agent, action, plan)
 

@@ -10,6 +10,7 @@ of small tensor calls; on a GPU the same graphs are what CUDA graphs capture).
 """
 from __future__ import annotations
 
+import functools
 import types
 from typing import Callable, Optional
 
@@ -19,14 +20,20 @@ __all__ = ["own_copy", "compile_for_world", "WorldKernel"]
 
 
 def own_copy(fn: Callable) -> Callable:
-    """``fn`` with a code object of its own, for one world's ``torch.compile``.
+    """``fn`` with a code object of its own, for one world's ``torch.compile`` (also partials and bound methods).
 
     Dynamo keeps compiled graphs per code object and gives up (runs eagerly)
     after eight recompilations of one; every world's tables are guarded on, so
     without a private copy the ninth compiled world in a process (a test
     session, a sweep) would silently lose its compiled step.
     """
-    return types.FunctionType(fn.__code__.replace(), fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__)
+    if isinstance(fn, functools.partial):
+        return functools.partial(own_copy(fn.func), *fn.args, **fn.keywords)
+    if isinstance(fn, types.MethodType):
+        return types.MethodType(own_copy(fn.__func__), fn.__self__)
+    copy = types.FunctionType(fn.__code__.replace(), fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__)
+    copy.__kwdefaults__ = fn.__kwdefaults__
+    return copy
 
 
 def compile_for_world(fn: Callable, mode: Optional[str]) -> Callable:

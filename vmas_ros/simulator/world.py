@@ -10,7 +10,7 @@ physical properties changes.
 """
 from __future__ import annotations
 
-from typing import Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import torch
 from torch import Tensor
@@ -20,7 +20,7 @@ from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
 from vmas_ros.simulator.compiling import compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
-from vmas_ros.simulator.layout import join_xy, split_xy_stacked
+from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.state_store import StateStore
 from vmas_ros.simulator.tables import WorldTables, build_tables
@@ -34,14 +34,17 @@ from vmas_ros.simulator.utils import (
     TORQUE_CONSTRAINT_FORCE,
 )
 from vmas_ros.simulator.world_actions import ActionInputs
+from vmas_ros.simulator.world_state import StateAccess
 from vmas_ros.simulator.world_rays import RayQueries
 
 __all__ = ["World"]
 
 
-def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) -> bool:
-    """Whether ``current`` are the very tensors ``parts``, none written in place since ``versions``."""
-    return len(parts) == len(current) and all(a is b and a._version == v for a, b, v in zip(parts, current, versions))
+def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.StepParams, actions: Tensor,
+             fixed_rotation: Optional[Tensor], kernels: tuple = ()) -> Tuple[physics.PlanarState, tuple]:
+    """The step as one function (what ``compile_physics`` compiles): the physics, then each state kernel."""
+    new = physics.step_planar(state, tables, params, actions, fixed_rotation, actions_writable=True)
+    return new, tuple(kernel(new.q, new.v) for kernel in kernels)
 
 
 #: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
@@ -49,7 +52,7 @@ def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) 
 _EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_nearest_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
 
 
-class World(RayQueries, ActionInputs):
+class World(RayQueries, ActionInputs, StateAccess):
     """A batch of ``batch_dim`` 2D worlds sharing the same entities (VMAS ``World``)."""
 
     def __init__(
@@ -106,8 +109,11 @@ class World(RayQueries, ActionInputs):
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
         #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
-        self._physics_step = physics.step_planar
+        self._physics_step = _advance
         self._compile_mode: Optional[str] = None
+        #: pure functions of the new state a step evaluates with its physics (see add_state_kernel)
+        self._state_kernels: List[Callable] = []
+        self._kernel_outputs: Tuple[int, list] = (-1, [])  # (store generation, one output per kernel)
         #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
         self._ray_kernels = _EAGER_RAY_KERNELS
 
@@ -141,16 +147,16 @@ class World(RayQueries, ActionInputs):
         """
         self._compile_mode = mode
         if not enabled:
-            self._physics_step = physics.step_planar
+            self._physics_step = _advance
             self._ray_kernels = _EAGER_RAY_KERNELS
             return
-        self._physics_step = compile_for_world(physics.step_planar, mode)
+        self._physics_step = compile_for_world(_advance, mode)
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
         self._ray_kernels = {kind: compile_for_world(fn, mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
-        return self._physics_step is not physics.step_planar
+        return self._physics_step is not _advance
 
     @property
     def compile_mode(self) -> Optional[str]:
@@ -291,11 +297,11 @@ class World(RayQueries, ActionInputs):
             fixed_rotation = self._joint_fixed_rotations(tables)
         params = self._step_params()
         physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
-        new = self._physics_step(state, tables, params, actions, fixed_rotation,
-                                  actions_writable=True)  # a fresh stack, ours to add into
+        new, outputs = self._physics_step(state, tables, params, actions, fixed_rotation, tuple(self._state_kernels))
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
         store.adopt(new.q, new.v)
+        self._kernel_outputs = (store.gen, list(outputs))
         if self._dim_c > 0:
             for agent in self._agents:
                 if not agent.silent and agent.action.c is not None:
@@ -308,91 +314,6 @@ class World(RayQueries, ActionInputs):
             linear = split_xy_stacked(torch.stack([getattr(e.state, lin) for e in entities]))
             out.append(torch.cat([linear, torch.stack([getattr(e.state, ang) for e in entities])[..., 0].unsqueeze(0)]))
         return physics.PlanarState(*out)
-
-    def stacked_state(self, field: str = "pos") -> Tensor:
-        """``[n_entities, batch, D]``: a state field of every entity, in ``entities`` order.
-
-        Scenarios that score or observe all entities at once use this instead
-        of stacking per-entity tensors themselves: right after a step it is the
-        physics output itself (no copy), and it is rebuilt only when some
-        entity's tensor was replaced or written in place since (tracked by
-        identity and torch's version counter, so it is never stale). Treat it
-        as read-only: it shares memory with the entities' states.
-        Agents are the last ``len(agents)`` rows (``entities`` is landmarks then agents).
-        """
-        if self._store.clean():
-            return self._store.stack(field)
-        current = [getattr(e.state, field) for e in self.entities]
-        cached = self._stacks.get(field)
-        if cached is not None:
-            parts, versions, stack = cached
-            if _unchanged(parts, versions, current):
-                return stack
-        stack = torch.stack(current)
-        self._stacks[field] = (current, [t._version for t in current], stack)
-        return stack
-
-    def stacked_xy(self, field: str = "pos") -> Tuple[Tensor, Tensor]:
-        """``(x, y)``, each ``[n_entities, batch]``: a 2D state field of every entity as planar components.
-
-        For scenario code that works per coordinate: ``sqrt(dx * dx + dy * dy)``
-        over contiguous rows vectorises, a norm over a trailing dim of 2 does
-        not (about 10x slower at 30,000 envs). Right after a step these are
-        rows of the physics state itself (no copy); otherwise they are split
-        from :meth:`stacked_state`. Read-only, like :meth:`stacked_state`.
-        """
-        if field not in ("pos", "vel"):
-            raise ValueError(f"stacked_xy: field must be 'pos' or 'vel', got {field!r}")
-        if self._store.clean():
-            planar = self._store.planar()[0 if field == "pos" else 1]
-            return planar[0], planar[1]
-        stack = self.stacked_state(field)
-        split = self._xy_splits.get(field)
-        if split is None or split[0] is not stack:
-            split = self._xy_splits[field] = (stack, split_xy_stacked(stack.contiguous()))
-        return split[1][0], split[1][1]
-
-    def set_positions(self, entities: List[Entity], x: Tensor, y: Tensor) -> None:
-        """Place several entities in every env at once: ``x``, ``y`` are ``[len(entities), B]``.
-
-        The same as ``entity.set_pos(...)`` for each of them (observers are
-        notified alike), but entities that are consecutive rows of
-        ``entities`` written right after a step go straight into the step's
-        state: two copies, and the next step needs no rebuild (discovery moves
-        its covered targets every step). Like a step, it hands every entity
-        fresh views of its state.
-        """
-        if len(entities) != x.shape[0] or x.shape != y.shape:
-            raise ValueError(f"set_positions: {len(entities)} entities but x {tuple(x.shape)} and y {tuple(y.shape)}")
-        slots = [e.state._slot for e in entities]
-        lo = slots[0] if slots else 0
-        if slots == list(range(lo, lo + len(slots))) and self._store.clean():
-            self._store.write_rows(lo, lo + len(slots), x, y)
-            for entity in entities:
-                entity.notify_observers(batch_index=None)
-            return
-        for entity, pos in zip(entities, join_xy(x, y).unbind(0)):
-            entity.set_pos(pos, batch_index=None)
-
-    def planar_state(self) -> Tuple[Tensor, Tensor]:
-        """``(q, v)``, each ``[3, n_entities, batch]``: (x, y, angle) and (vx, vy, angular velocity) of every entity.
-
-        The physics step's own layout: right after a step these are its output
-        (no copy, the same objects until the state changes, so scenarios can
-        cache on their identity); otherwise they are stacked from the entities
-        once per change. For scenario kernels that compute from the whole state
-        at once (see ``compiling.WorldKernel``). Read-only.
-        """
-        store = self._store
-        if store.clean():
-            return store.planar()
-        current = [getattr(e.state, f) for f in ("pos", "rot", "vel", "ang_vel") for e in self.entities]
-        cached = self._stacks.get("planar")
-        if cached is not None and _unchanged(cached[0], cached[1], current):
-            return cached[2]
-        state = self._planar_from_entities(self.entities)
-        self._stacks["planar"] = (current, [t._version for t in current], (state.q, state.v))
-        return state.q, state.v
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""

@@ -51,7 +51,7 @@ class Scenario(BaseScenario):
         for i in range(n_agents):
             world.add_landmark(Landmark(name=f"landmark {i}", collide=False, color=Color.BLACK))
         self._reward_cache = None
-        n_landmarks = n_agents
+        n_landmarks = self._n_landmarks = n_agents
         #: per observing agent, the rows of world.stacked_state() it sees relative to itself:
         #: every landmark, then (with obs_agents) every other agent; entities are landmarks then agents
         self._seen_rows = [
@@ -64,9 +64,21 @@ class Scenario(BaseScenario):
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._obs_cache = None  # (pos stack, vel stack, observations) of the last state observed
         self._few_cache = None  # (pos stack, vel stack, (rewards, observations)) of the last state, few envs only
-        self._few_kernel = WorldKernel(world, _few_envs_outputs)  # compiled with the world's physics
         self._overlap = None  # see _overlap_thresholds
+        self._few_kernel = WorldKernel(world, self._few_envs_kernel)  # compiled with the world's physics
+        # at a few envs every step computes them with its physics (one compiled call for both when compiled)
+        self._few_handle = world.add_state_kernel(self._few_envs_kernel) if batch_dim < FEW_ENVS else None
+        # fill the index and threshold caches now: filled inside a compiled trace they would split its graph
+        self._overlap_thresholds(world.device, world.agents)
+        self._seen_rows_on[("relative", world.device)] = torch.tensor(self._seen_flat_rows, device=world.device)
         return world
+
+    def _few_envs_kernel(self, q: torch.Tensor, v: torch.Tensor) -> tuple:
+        """:func:`_few_envs_outputs` with this world's constants (a state kernel: a pure function of q, v)."""
+        seen = self._seen_rows_on.get(("relative", q.device))
+        if seen is None:
+            seen = self._seen_rows_on[("relative", q.device)] = torch.tensor(self._seen_flat_rows, device=q.device)
+        return _few_envs_outputs(q, v, self._n_landmarks, self._overlap_thresholds(q.device)[0], seen)
 
     def reset_world_at(self, env_index=None) -> None:
         world = self.world
@@ -80,12 +92,13 @@ class Scenario(BaseScenario):
             self._reward_cache = self._reward_few_envs() if self.world.batch_dim < FEW_ENVS else self._reward_many_envs()
         return self._reward_cache
 
-    def _overlap_thresholds(self, device) -> tuple:
+    def _overlap_thresholds(self, device, agents=None) -> tuple:
         """``[A, A, 1]`` distances (and their squares) below which two agents overlap; -1 where a pair cannot count."""
         if self._overlap is None or self._overlap[0].device != device:
-            n_agents = len(self.world.agents)
-            radii = torch.tensor([a.shape.radius for a in self.world.agents], device=device)
-            collides = torch.tensor([a.collide for a in self.world.agents], device=device)
+            agents = self.world.agents if agents is None else agents
+            n_agents = len(agents)
+            radii = torch.tensor([a.shape.radius for a in agents], device=device)
+            collides = torch.tensor([a.collide for a in agents], device=device)
             eligible = collides.view(-1, 1) & ~torch.eye(n_agents, dtype=torch.bool, device=device)
             reach = radii.view(-1, 1) + radii.view(1, -1)
             # pairs that cannot count get a threshold no distance (or squared distance) is below
@@ -120,10 +133,9 @@ class Scenario(BaseScenario):
         cached = self._few_cache
         if cached is not None and cached[0] is q and cached[1] is v:
             return cached[2]
-        seen = self._seen_rows_on.get(("relative", q.device))
-        if seen is None:
-            seen = self._seen_rows_on[("relative", q.device)] = torch.tensor(self._seen_flat_rows, device=q.device)
-        outputs = self._few_kernel(q, v, len(world.landmarks), self._overlap_thresholds(q.device)[0], seen)
+        outputs = None if self._few_handle is None else world.take_state_kernel_output(self._few_handle)
+        if outputs is None:  # the state changed since the step (a reset, a setter), or many envs
+            outputs = self._few_kernel(q, v)
         self._few_cache = (q, v, outputs)
         return outputs
 
