@@ -33,16 +33,22 @@ from vmas_ros.simulator.utils import (
     LINEAR_FRICTION,
     TORQUE_CONSTRAINT_FORCE,
 )
-from vmas_ros.simulator.world_actions import ActionInputs
+from vmas_ros.simulator.world_actions import ActionInputs, assemble_actions
 from vmas_ros.simulator.world_state import StateAccess
 from vmas_ros.simulator.world_rays import RayQueries
 
 __all__ = ["World"]
 
 
-def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.StepParams, actions: Tensor,
+def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.StepParams, actions,
              fixed_rotation: Optional[Tensor], kernels: tuple = ()) -> Tuple[physics.PlanarState, tuple]:
-    """The step as one function (what ``compile_physics`` compiles): the physics, then each state kernel."""
+    """The step as one function (what ``compile_physics`` compiles): the physics, then each state kernel.
+
+    ``actions`` is the ``[3, N, B]`` input, or the agents' (forces, torques) lists to assemble it from
+    (in the compiled graph, where that costs nothing; see ``ActionInputs``).
+    """
+    if isinstance(actions, tuple):
+        actions = assemble_actions(state.q, tables, *actions)
     new = physics.step_planar(state, tables, params, actions, fixed_rotation, actions_writable=True)
     return new, tuple(kernel(new.q, new.v) for kernel in kernels)
 
@@ -291,7 +297,7 @@ class World(RayQueries, ActionInputs, StateAccess):
         # what was stacked from the old state is stale once the step runs: freed before the step's
         # own tensors are allocated (peak memory)
         self._stacks, self._xy_splits = {}, {}
-        actions = self._action_stack(tables, state.q)
+        actions = self._action_input(tables, state.q)
         fixed_rotation = None
         if tables.joints is not None:
             fixed_rotation = self._joint_fixed_rotations(tables)

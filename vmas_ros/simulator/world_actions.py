@@ -22,26 +22,16 @@ from vmas_ros.simulator.tables import WorldTables
 class ActionInputs:
     """The step's action input; ``World`` provides ``_agents``."""
 
-    def _action_stack(self, tables: WorldTables, q: Tensor) -> Tensor:
-        """The step's action input ``[3, N, B]`` (fx, fy, torque per entity, zero for landmarks; see physics.stack_actions).
-
-        A fresh tensor: the physics adds contact forces into it.
-        """
-        n_agents = tables.n_agents
-        actions = q.new_zeros(q.shape)
-        if n_agents == 0:
-            return actions
+    def _action_input(self, tables: WorldTables, q: Tensor):
+        """The step's action input: ``[3, N, B]`` (see :func:`assemble_actions`), or, when no limit or
+        held agent asks for clamping here and the physics is compiled, the agents' (forces, torques)
+        lists for the compiled step to assemble in its own graph."""
+        if tables.n_agents == 0:
+            return q.new_zeros(q.shape)
+        if self.physics_compiled and not (tables.limits_force or tables.limits_torque or self._fixed_agents(tables)):
+            return ([a.state._force for a in self._agents], [a.state._torque for a in self._agents])
         agent_force, agent_torque = self._agent_actions(tables)
-        rows = actions[:, tables.n_entities - n_agents:]  # the agents' [3, A, B] block (landmarks stay zero)
-        if q.numel() <= physics.SMALL_BATCH_ELEMENTS:
-            # few elements: each call's fixed cost dominates; one strided copy
-            rows[:2].copy_(agent_force.permute(2, 0, 1))
-        else:
-            # many: the components copied straight into their rows (bit-exact, no batch-sized temporaries;
-            # a strided copy of interleaved pairs runs at a fraction of memory speed on the CPU)
-            split_xy_into(agent_force, rows[:2])
-        rows[2].copy_(agent_torque[..., 0])
-        return actions
+        return assemble_actions(q, tables, agent_force, agent_torque)
 
     def _agent_actions(self, tables: WorldTables) -> Tuple[Tensor, Tensor]:
         """Agents' action forces [A, B, 2] and torques [A, B, 1], clamped to their limits as VMAS does."""
@@ -73,3 +63,26 @@ class ActionInputs:
         if cached is None:
             cached = tables._fixed_agents_cache = not all(a.movable and a.rotatable for a in self._agents)
         return cached
+
+
+def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
+    """The step's action input ``[3, N, B]`` (fx, fy, torque per entity, zero for landmarks; see
+    physics.stack_actions) from the agents' forces ``[A, B, 2]`` and torques ``[A, B, 1]`` (stacks, or
+    lists of per-agent tensors). A fresh tensor: the physics adds contact forces into it.
+    """
+    actions = q.new_zeros(q.shape)
+    n_agents = tables.n_agents
+    if n_agents == 0:
+        return actions
+    if isinstance(forces, (list, tuple)):
+        forces, torques = torch.stack(forces), torch.stack(torques)
+    rows = actions[:, tables.n_entities - n_agents:]  # the agents' [3, A, B] block (landmarks stay zero)
+    if q.numel() <= physics.SMALL_BATCH_ELEMENTS or torch.compiler.is_compiling():
+        # few elements: each call's fixed cost dominates; one strided copy (and the compiler's choice)
+        rows[:2].copy_(forces.permute(2, 0, 1))
+    else:
+        # many: the components copied straight into their rows (bit-exact, no batch-sized temporaries;
+        # a strided copy of interleaved pairs runs at a fraction of memory speed on the CPU)
+        split_xy_into(forces, rows[:2])
+    rows[2].copy_(torques[..., 0])
+    return actions

@@ -162,36 +162,36 @@ class Scenario(BaseScenario):
     def _observations(self) -> torch.Tensor:
         """Every agent's observation [A, B, obs], computed once per state.
 
-        Keyed on the identity of the world's stacked positions and velocities:
+        Many envs: laid out [A, B, (own pos, own vel, landmarks, other agents), 2]
+        moving whole (x, y) pairs (see layout.as_pairs); each relative position
+        is subtracted straight into its slot, so the only temporary is the other
+        agents' gathered rows (the landmarks are the same rows for every agent:
+        a broadcast view, no copy). Keyed on the identity of the world's
+        stacked positions and velocities:
         ``stacked_state`` hands out a new stack whenever the state changed (a
         step, a reset, a ``set_pos``), so a cached result is never stale.
         """
+        if self.world.batch_dim < FEW_ENVS:  # computed with the rewards, and cached (see _few_envs)
+            return self._few_envs()[1]
         pos, vel = self.world.stacked_state("pos"), self.world.stacked_state("vel")
         cached = self._obs_cache
         if cached is not None and cached[0] is pos and cached[1] is vel:
             return cached[2]
         n_landmarks = len(self.world.landmarks)
         own_pos, own_vel = pos[n_landmarks:], vel[n_landmarks:]  # [A, B, 2]
-        if pos.shape[1] < FEW_ENVS:  # computed with the reward (see _few_envs)
-            observations = self._few_envs()[1]
-        else:
-            # lay out [A, B, (own pos, own vel, landmarks, other agents), 2] moving whole (x, y)
-            # pairs (see layout.as_pairs); each relative position is subtracted straight into its
-            # slot, so the only temporary is the other agents' gathered rows (the landmarks are
-            # the same rows for every agent: a broadcast view, no copy)
-            n_agents, batch = own_pos.shape[:2]
-            n_rows = len(self._seen_rows[0])
-            observations = pos.new_empty(n_agents, batch, n_rows + 2, 2)
-            pairs, own = as_pairs(observations), as_pairs(own_pos).unsqueeze(2)  # [A, B, R + 2], [A, B, 1]
-            pairs[:, :, 0] = own[:, :, 0]
-            pairs[:, :, 1] = as_pairs(own_vel)
-            landmarks = as_pairs(pos[:n_landmarks]).t().unsqueeze(0).expand(n_agents, batch, n_landmarks)
-            _subtract_into(pairs[:, :, 2:2 + n_landmarks], landmarks, own)
-            if n_rows > n_landmarks:
-                others = [row[n_landmarks:] for row in self._seen_rows]
-                gathered = as_pairs(self._gathered_rows(pos, others, key="others"))  # [A, A - 1, B]
-                _subtract_into(pairs[:, :, 2 + n_landmarks:], gathered.transpose(1, 2), own)
-            observations = observations.flatten(2)
+        n_agents, batch = own_pos.shape[:2]
+        n_rows = len(self._seen_rows[0])
+        observations = pos.new_empty(n_agents, batch, n_rows + 2, 2)
+        pairs, own = as_pairs(observations), as_pairs(own_pos).unsqueeze(2)  # [A, B, R + 2], [A, B, 1]
+        pairs[:, :, 0] = own[:, :, 0]
+        pairs[:, :, 1] = as_pairs(own_vel)
+        landmarks = as_pairs(pos[:n_landmarks]).t().unsqueeze(0).expand(n_agents, batch, n_landmarks)
+        _subtract_into(pairs[:, :, 2:2 + n_landmarks], landmarks, own)
+        if n_rows > n_landmarks:
+            others = [row[n_landmarks:] for row in self._seen_rows]
+            gathered = as_pairs(self._gathered_rows(pos, others, key="others"))  # [A, A - 1, B]
+            _subtract_into(pairs[:, :, 2 + n_landmarks:], gathered.transpose(1, 2), own)
+        observations = observations.flatten(2)
         self._obs_cache = (pos, vel, observations)
         return observations
 
