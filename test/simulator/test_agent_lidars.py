@@ -49,3 +49,21 @@ def test_one_cast_per_state(monkeypatch):
     env.agents[1].set_pos(torch.zeros(2, 2), batch_index=None)
     env.get_from_scenario(True, False, False, False)
     assert len(calls) == 2
+
+
+def test_readings_follow_targets_moved_by_set_positions(device):
+    """discovery moves its targets with World.set_positions between steps; readings taken before and
+    after the move must each match the state they were taken in."""
+    env = make_env("discovery", num_envs=3, device=device, seed=3)
+    env.step([torch.zeros(3, 2, device=device) for _ in env.agents])
+    lidars, agent = env.scenario._lidars[0], env.agents[0]
+    before = lidars.reading(agent).clone()
+    targets = env.scenario.targets
+    ahead = agent.state.pos + torch.tensor([0.1, 0.0], device=device)
+    x = torch.stack([ahead[:, 0]] + [torch.full((3,), 50.0, device=device)] * (len(targets) - 1))
+    y = torch.stack([ahead[:, 1]] + [torch.full((3,), 50.0, device=device)] * (len(targets) - 1))
+    env.world.set_positions(targets, x, y)
+    after = lidars.reading(agent)
+    assert torch.equal(after, agent.sensors[0].measure())
+    assert not torch.equal(after, before)
+    assert (after < agent.sensors[0].max_range).any(), "the target placed next to the agent is seen"

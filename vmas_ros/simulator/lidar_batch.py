@@ -153,20 +153,24 @@ class AgentLidars:
         self._sensors = [agent.sensors[slot] for agent in agents]
         self._row = {agent.name: i for i, agent in enumerate(agents)}
         self._batched = BatchedLidars()
-        self._key: Optional[tuple] = None
+        self._key: Optional[torch.Tensor] = None
         self._readings: List[torch.Tensor] = []
 
     def reading(self, agent) -> torch.Tensor:
         """``agent``'s lidar distances ``[B, n_rays]`` in the current state."""
         world = self._world
-        pos, rot = world.stacked_state("pos"), world.stacked_state("rot")
-        if self._key is None or self._key[0] is not pos or self._key[1] is not rot:
-            small = world.batch_dim * self._sensors[0].n_rays <= BATCH_BELOW_ELEMENTS
-            readings = self._batched.cast(world, self._sensors, keep_grad=True) if small else None
-            if readings is None:
-                readings = [sensor.measure() for sensor in self._sensors]
-            else:
-                for sensor, measured in zip(self._sensors, readings):
-                    sensor._last_measurement = measured
-            self._key, self._readings = (pos, rot), readings
+        q, _ = world.planar_state()  # the same object until the state changes
+        if self._key is not q:
+            self._key, self._readings = q, self._cast()
         return self._readings[self._row[agent.name]]
+
+    def _cast(self) -> List[torch.Tensor]:
+        world = self._world
+        readings = None
+        if world.batch_dim * self._sensors[0].n_rays <= BATCH_BELOW_ELEMENTS:
+            readings = self._batched.cast(world, self._sensors, keep_grad=True)
+        if readings is None:
+            return [sensor.measure() for sensor in self._sensors]
+        for sensor, measured in zip(self._sensors, readings):
+            sensor._last_measurement = measured
+        return readings

@@ -105,20 +105,20 @@ class StateStore:
         return True
 
     def write_rows(self, lo: int, hi: int, x: Tensor, y: Tensor) -> None:
-        """Set the positions of entities ``lo:hi`` to ``(x, y)`` (``[hi - lo, B]`` each) in place; only while clean.
+        """Set the positions of entities ``lo:hi`` to ``(x, y)`` (``[hi - lo, B]`` each); only while clean.
 
-        The store stays clean: the write is recorded as its own, the stacks
-        built from the old positions are dropped and the generation moves on,
-        so every entity fetches fresh views (no entity holds an override while
-        the store is clean, so none is lost).
+        Into a copy of ``q``, not in place: the state is a new object, as after
+        a step, so everything keyed on the old one's identity (scenario caches
+        of ``planar_state``) sees the change, and views handed out before keep
+        their values. The store stays clean, the stacks built from the old
+        positions are dropped and the generation moves on, so every entity
+        fetches fresh views (no entity holds an override while the store is
+        clean, so none is lost).
         """
-        q = self._q
+        q = self._q.clone()
         q[0, lo:hi] = x
         q[1, lo:hi] = y
-        self.gen += 1
-        self._versions = (q._version, self._v._version)
-        self._stacks = {name: entry for name, entry in self._stacks.items() if name not in ("pos", "rot")}
-        self._pos = None
+        self.adopt(q, self._v)
 
     # -------------------------------------------------------------- reading
     def planar(self) -> Tuple[Tensor, Tensor]:
