@@ -30,6 +30,7 @@ Kwargs
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -39,6 +40,7 @@ from vmas_ros.scenarios.common import read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
+from vmas_ros.simulator.layout import join_xy
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import LINE_MIN_DIST, Color
@@ -93,9 +95,12 @@ class Scenario(BaseScenario):
         self.on_goal = torch.zeros(batch_dim, self.n_packages, dtype=torch.bool, device=world.device)
         self._reward = torch.zeros(batch_dim, device=world.device)
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
-        self._obs_cache = None  # (pos stack, vel stack, on_goal, observations) of the last state observed
-        # compiled when the world compiles its physics
-        self._status_kernel, self._observation_kernel = WorldKernel(world, package_status), WorldKernel(world, observations)
+        self._outputs_cache = None  # (q, v, (distance, on_goal, observations)) of the last state
+        # every step computes the packages' status and the observations with its physics (in its compiled
+        # graph when compiled); after a reset or a setter the scenario computes them itself
+        kernel = functools.partial(state_outputs, n_packages=self.n_packages, length=self.package_length,
+                                   width=self.package_width)
+        self._outputs_handle, self._outputs_kernel = world.add_state_kernel(kernel), WorldKernel(world, kernel)
         return world
 
     # ------------------------------------------------------------------- reset
@@ -130,8 +135,21 @@ class Scenario(BaseScenario):
         the boundary point nearest it, or that point within the goal's reach),
         equal to float rounding, in a fraction of the passes.
         """
-        q, _ = self.world.planar_state()  # landmarks first: the goal, then the packages
-        return self._status_kernel(q, self.n_packages, self.package_length, self.package_width)
+        distance, on_goal, _ = self._outputs()
+        return distance, on_goal
+
+    def _outputs(self) -> tuple:
+        """``(distance [B, P], on_goal [B, P], observations [A, B, obs])`` of the current state, once per state."""
+        world = self.world
+        q, v = world.planar_state()
+        cached = self._outputs_cache
+        if cached is not None and cached[0] is q and cached[1] is v:
+            return cached[2]
+        outputs = world.take_state_kernel_output(self._outputs_handle)
+        if outputs is None:  # the state changed since the step (a reset, a setter)
+            outputs = self._outputs_kernel(q, v)
+        self._outputs_cache = (q, v, outputs)
+        return outputs
 
     def _paint(self) -> None:
         for package, color in zip(self.packages, pk.package_colors(self.on_goal).unbind(1)):
@@ -155,24 +173,16 @@ class Scenario(BaseScenario):
         if index == self.n_agents - 1:
             # the environment asks in agent order: the next collection computes afresh, so observations
             # handed out without a copy (fresh_observations) never alias a later collection's
-            self._obs_cache = None
+            self._outputs_cache = None
         return observation
 
     def _observations(self) -> torch.Tensor:
-        """Every agent's observation ``[A, B, obs]``, written into one tensor once per state.
+        """Every agent's observation ``[A, B, obs]``, computed once per state (see :func:`state_outputs`).
 
-        Keyed on the identity of the world's stacked positions and velocities
-        (rebuilt whenever any entity's state changes) and of ``on_goal``
-        (replaced by every reward), so a cached result is never stale.
+        Their delivered flags are the state's own, which ``on_goal`` holds
+        once the state's reward (or reset) has been computed.
         """
-        world = self.world
-        pos, vel = world.stacked_state("pos"), world.stacked_state("vel")  # the goal, packages, agents
-        cached = self._obs_cache
-        if cached is not None and cached[0] is pos and cached[1] is vel and cached[2] is self.on_goal:
-            return cached[3]
-        out = self._observation_kernel(pos, vel, self.on_goal, self.n_packages)
-        self._obs_cache = (pos, vel, self.on_goal, out)
-        return out
+        return self._outputs()[2]
 
     def done(self) -> torch.Tensor:
         return self.on_goal.all(dim=-1)
@@ -195,6 +205,17 @@ def package_status(q: torch.Tensor, n_packages: int, length: float, width: float
     inside = distance < _hypot(px - qx, py - qy)
     touching = _hypot(gx - qx, gy - qy) < GOAL_RADIUS + LINE_MIN_DIST
     return distance.T, (inside | touching).T
+
+
+def state_outputs(q: torch.Tensor, v: torch.Tensor, n_packages: int, length: float, width: float) -> tuple:
+    """``(distance [B, P], on_goal [B, P], observations [A, B, obs])`` from the planar state ``[3, N, B]``.
+
+    The scenario's state kernel (see ``World.add_state_kernel``): one pure
+    function of the state for the reward's status and all observations.
+    """
+    distance, on_goal = package_status(q, n_packages, length, width)
+    pos, vel = join_xy(q[0], q[1]), join_xy(v[0], v[1])  # [N, B, 2]: the goal, packages, agents
+    return distance, on_goal, observations(pos, vel, on_goal, n_packages)
 
 
 def observations(pos: torch.Tensor, vel: torch.Tensor, on_goal: torch.Tensor, n_packages: int) -> torch.Tensor:

@@ -70,7 +70,12 @@ def split_xy_into(vectors: Tensor, xy: Tensor) -> None:
 
 
 def join_xy(x: Tensor, y: Tensor) -> Tensor:
-    """Contiguous ``[..., 2]`` vectors from components ``x``, ``y`` (bit-exact copies)."""
+    """Contiguous ``[..., 2]`` vectors from components ``x``, ``y`` (bit-exact copies).
+
+    Under ``torch.compile`` a plain stack, which the compiler fuses into its loops.
+    """
+    if torch.compiler.is_compiling():
+        return torch.stack([x, y], dim=-1)
     if x.dtype in (torch.float32, torch.float64) and y.dtype == x.dtype and x.shape == y.shape:
         return torch.view_as_real(torch.complex(x, y))
     return torch.stack([x, y], dim=-1)

@@ -303,7 +303,10 @@ class World(RayQueries, ActionInputs, StateAccess):
             fixed_rotation = self._joint_fixed_rotations(tables)
         params = self._step_params()
         physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
-        new, outputs = self._physics_step(state, tables, params, actions, fixed_rotation, tuple(self._state_kernels))
+        # state kernels ride along in compiled steps only: eagerly, computing them when they are asked for
+        # costs the same calls and keeps the step's own peak memory lower
+        kernels = tuple(self._state_kernels) if self.physics_compiled else ()
+        new, outputs = self._physics_step(state, tables, params, actions, fixed_rotation, kernels)
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
         store.adopt(new.q, new.v)

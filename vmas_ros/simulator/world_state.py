@@ -76,10 +76,11 @@ class StateAccess:
         """Have every step evaluate ``kernel(q, v)`` on its new planar state; returns the kernel's handle.
 
         For scenarios whose rewards or observations are a pure function of the
-        state (see :meth:`planar_state`): the step runs the kernel right after
-        its physics, in the same compiled graph when the physics is compiled
-        (one call instead of two, which at a few envs is most of the cost).
-        Read the result with :meth:`take_state_kernel_output`.
+        state (see :meth:`planar_state`): a compiled step runs the kernel right
+        after its physics, in the same graph (one call instead of two, which at
+        a few envs is most of the cost). Eager steps do not run it: the
+        scenario computes the same thing when it is asked for. Read the result
+        with :meth:`take_state_kernel_output`.
         """
         self._state_kernels.append(kernel)
         return len(self._state_kernels) - 1
@@ -93,7 +94,7 @@ class StateAccess:
         (a caller that writes into them would change what the next one gets).
         """
         generation, outputs = self._kernel_outputs
-        if generation != self._store.gen or not self._store.clean():
+        if generation != self._store.gen or handle >= len(outputs) or not self._store.clean():
             return None
         output, outputs[handle] = outputs[handle], None
         return output
