@@ -67,3 +67,19 @@ def test_readings_follow_targets_moved_by_set_positions(device):
     assert torch.equal(after, agent.sensors[0].measure())
     assert not torch.equal(after, before)
     assert (after < agent.sensors[0].max_range).any(), "the target placed next to the agent is seen"
+
+
+@pytest.mark.slow
+def test_compiled_worlds_cast_all_lidars_in_one_graph_close_to_measure(device):
+    """A compiled world's AgentLidars read all lidars from one compiled kernel: the same distances as
+    each Lidar.measure() to float rounding, some of them hits."""
+    env = make_env("discovery", num_envs=5, device=device, seed=2, compile_physics=True)
+    env.step([torch.zeros(5, 2, device=device) for _ in env.agents])
+    lidars, agents = env.scenario._lidars[0], env.agents
+    target = env.scenario.targets[0]
+    target.set_pos(agents[1].state.pos + torch.tensor([0.0, 0.1], device=device), batch_index=None)
+    readings = [lidars.reading(agent) for agent in agents]
+    assert lidars._compiled_plan is not None and lidars._compiled_plan[1] is not None, "the compiled cast ran"
+    for agent, reading in zip(agents, readings):
+        torch.testing.assert_close(reading, agent.sensors[0].measure(), rtol=1e-5, atol=1e-5)
+    assert (readings[1] < agents[1].sensors[0].max_range).any()

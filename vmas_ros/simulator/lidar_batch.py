@@ -20,12 +20,14 @@ two bit for bit.
 from __future__ import annotations
 
 import contextlib
+import functools
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import torch
 
 from vmas_ros.simulator import raycast
+from vmas_ros.simulator.compiling import WorldKernel
 
 
 @dataclass
@@ -128,6 +130,9 @@ def cast_together(world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
 
 #: AgentLidars casts all lidars together while envs x rays is at most this (measured: faster below, slower above)
 BATCH_BELOW_ELEMENTS = 8192
+#: the same for compiled worlds' one-graph cast (measured: discovery at 1,000 envs x 15 rays 1.6 -> 1.2 ms
+#: per step with it, flocking at 10,000 envs x 12 rays 7.0 -> 7.5 ms: one lidar's temporaries stay in cache)
+COMPILED_BATCH_BELOW_ELEMENTS = 32768
 
 
 class AgentLidars:
@@ -155,6 +160,9 @@ class AgentLidars:
         self._batched = BatchedLidars()
         self._key: Optional[torch.Tensor] = None
         self._readings: List[torch.Tensor] = []
+        #: compiled worlds cast all lidars as one compiled function of the planar state (see lidar_kernel):
+        #: (the world layout it was planned for, its WorldKernel), planned on the first compiled cast
+        self._compiled_plan: Optional[tuple] = None
 
     def reading(self, agent) -> torch.Tensor:
         """``agent``'s lidar distances ``[B, n_rays]`` in the current state."""
@@ -167,10 +175,83 @@ class AgentLidars:
     def _cast(self) -> List[torch.Tensor]:
         world = self._world
         readings = None
-        if world.batch_dim * self._sensors[0].n_rays <= BATCH_BELOW_ELEMENTS:
+        if world.physics_compiled and world.batch_dim * self._sensors[0].n_rays <= COMPILED_BATCH_BELOW_ELEMENTS:
+            readings = self._compiled_cast()
+        if readings is None and world.batch_dim * self._sensors[0].n_rays <= BATCH_BELOW_ELEMENTS:
             readings = self._batched.cast(world, self._sensors, keep_grad=True)
         if readings is None:
             return [sensor.measure() for sensor in self._sensors]
         for sensor, measured in zip(self._sensors, readings):
             sensor._last_measurement = measured
         return readings
+
+    def _layout(self) -> tuple:
+        """(the world's entities, each lidar's targets) as ids: what a compiled cast's row indices assume."""
+        world = self._world
+        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in self._sensors)
+        return tuple(id(e) for e in world.entities), targets
+
+    def _compiled_cast(self) -> Optional[List[torch.Tensor]]:
+        """Every lidar's reading from one compiled :func:`lidar_kernel` call, or None when it cannot cast them.
+
+        One compiled call instead of one per lidar, each with a dozen calls of
+        Python around its compiled kernel (discovery at 1,000 envs: 5 casts,
+        ~100 us each, against ~30 us for all five in one graph). Entity
+        filters may depend on the state, and entities may be added, so the
+        layout is checked on every cast and a change plans again.
+        """
+        world = self._world
+        layout = self._layout()
+        if self._compiled_plan is None or self._compiled_plan[0] != layout:
+            constants = _kernel_constants(world, self._sensors, layout[1])
+            kernel = None if constants is None else WorldKernel(world, functools.partial(lidar_kernel, **constants))
+            self._compiled_plan = (layout, kernel)
+        kernel = self._compiled_plan[1]
+        if kernel is None:
+            return None
+        return list(kernel(world.planar_state()[0]).unbind(0))
+
+
+def _kernel_constants(world, sensors: Sequence, targets: tuple) -> Optional[dict]:
+    """The constants of :func:`lidar_kernel` for these lidars, or None when it cannot cast them
+    (targets other than spheres, differing ray counts or ranges, no targets)."""
+    first = sensors[0]
+    if any(s.n_rays != first.n_rays or float(s.max_range) != float(first.max_range) for s in sensors):
+        return None
+    kinds = {id(e): e.shape.kind for e in world.entities}
+    union = [e for e in world.entities if any(id(e) in t for t in targets)]
+    if not union or any(kinds[i] != "sphere" for t in targets for i in t):
+        return None
+    device = first.agent.state.pos.device
+    seen = torch.tensor([[id(e) in t for t in targets] for e in union], device=device)  # [E, L]
+    angles = torch.stack([s.angles[0] for s in sensors]).unsqueeze(1)  # [L, 1, R]: relative ray angles
+    slot = {id(e): i for i, e in enumerate(world.entities)}
+    return dict(
+        origins=torch.tensor([slot[id(s.agent)] for s in sensors], device=device),
+        targets=torch.tensor([slot[id(e)] for e in union], device=device),
+        radius=torch.tensor([e.shape.radius for e in union], device=device).view(-1, 1, 1, 1),
+        cos0=torch.cos(angles), sin0=torch.sin(angles), max_range=float(first.max_range),
+        ignore=None if bool(seen.all()) else (~seen).to(angles.dtype).view(len(union), len(sensors), 1, 1),
+    )
+
+
+def lidar_kernel(q: torch.Tensor, origins: torch.Tensor, targets: torch.Tensor, radius: torch.Tensor,
+                 cos0: torch.Tensor, sin0: torch.Tensor, max_range: float,
+                 ignore: Optional[torch.Tensor]) -> torch.Tensor:
+    """Every lidar's distances ``[L, B, R]`` against sphere targets, from the planar state ``q`` ``[3, N, B]``.
+
+    A pure function of the state (compiled as a ``WorldKernel``): lidar ``l``
+    sits on entity ``origins[l]`` and its rays point at the relative angles
+    whose cosines and sines are ``cos0``/``sin0`` ``[L, 1, R]``; ``targets``
+    are the entity rows of the spheres, ``ignore`` (float 0/1 ``[E, L, 1, 1]``)
+    the (sphere, lidar) pairs a lidar does not see. The same numbers as
+    ``Lidar.measure()`` to float rounding.
+    """
+    ox, oy = q[0].index_select(0, origins).unsqueeze(-1), q[1].index_select(0, origins).unsqueeze(-1)  # [L, B, 1]
+    heading = q[2].index_select(0, origins).unsqueeze(-1)
+    cos_r, sin_r = torch.cos(heading), torch.sin(heading)
+    cos_a, sin_a = cos0 * cos_r - sin0 * sin_r, sin0 * cos_r + cos0 * sin_r  # [L, B, R]
+    cx = q[0].index_select(0, targets)[:, None, :, None]  # [E, 1, B, 1]
+    cy = q[1].index_select(0, targets)[:, None, :, None]
+    return raycast.ray_sphere_nearest_xy(ox, oy, cos_a, sin_a, cx, cy, radius, max_range, ignore=ignore)
+
