@@ -79,7 +79,7 @@ def test_compiled_worlds_cast_all_lidars_in_one_graph_close_to_measure(device):
     target = env.scenario.targets[0]
     target.set_pos(agents[1].state.pos + torch.tensor([0.0, 0.1], device=device), batch_index=None)
     readings = [lidars.reading(agent) for agent in agents]
-    assert lidars._compiled_plan is not None and lidars._compiled_plan[1] is not None, "the compiled cast ran"
+    assert lidars._compiled._plan is not None and lidars._compiled._plan[1] is not None, "the compiled cast ran"
     for agent, reading in zip(agents, readings):
         torch.testing.assert_close(reading, agent.sensors[0].measure(), rtol=1e-5, atol=1e-5)
     assert (readings[1] < agents[1].sensors[0].max_range).any()

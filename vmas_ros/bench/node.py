@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 NODE_COLUMNS = [
-    "run_id", "scenario", "scenario_kwargs", "lidar_rays", "num_envs", "window", "duration_s", "steps", "steps_per_s",
-    "wall_us", "actions_us", "engine_us", "lidar_us", "convert_us", "publish_us", "executor_us", "cpu_us", "threads",
-    "loadavg_1m",
+    "run_id", "scenario", "scenario_kwargs", "lidar_rays", "num_envs", "compiled", "window", "duration_s", "steps",
+    "steps_per_s", "wall_us", "actions_us", "engine_us", "lidar_us", "convert_us", "publish_us", "executor_us", "cpu_us",
+    "threads", "loadavg_1m",
 ]
 #: topic kinds the subscriber can take: the target's four, and everything else sim_node publishes by default
 CORE_KINDS = ("pose", "odom", "scan", "clock")
@@ -118,8 +118,12 @@ def _topics(node, kinds) -> Dict[str, str]:
 # ------------------------------------------------------------------- the run
 def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '{"n_agents": 4}', lidar_rays: int = 12, num_envs: int = 1,
                        duration: float = 3.0, repeats: int = 3, warmup: int = 1, subscribe: str = "core",
-                       raw_subscriber: bool = False, progress: bool = True) -> dict:
-    """Measure the node; returns ``{"rows": [...per window...], "summary": {...}}``."""
+                       raw_subscriber: bool = False, progress: bool = True, compile_physics: bool = False) -> dict:
+    """Measure the node; returns ``{"rows": [...per window...], "summary": {...}}``.
+
+    ``compile_physics``: the node's ``compile_physics`` parameter; the first step compiles, inside the
+    warm-up window (so ``warmup`` must be at least 1).
+    """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -130,6 +134,8 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
 
     if duration <= 0 or repeats < 1 or warmup < 0 or lidar_rays < 0 or num_envs < 1:
         raise ValueError("duration must be > 0, repeats >= 1, warmup >= 0, lidar_rays >= 0, num_envs >= 1")
+    if compile_physics and warmup < 1:
+        raise ValueError(f"--compile-physics needs --warmup >= 1 (the first step compiles), got {warmup}")
     run_id = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     subscriber: Optional[subprocess.Popen] = None
@@ -137,7 +143,7 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
     rows: List[dict] = []
     try:
         node = SimNode(scenario=scenario, scenario_kwargs=scenario_kwargs, num_envs=num_envs, real_time_factor=0.0,
-                       add_lidar=lidar_rays > 0, lidar_rays=max(1, lidar_rays))
+                       add_lidar=lidar_rays > 0, lidar_rays=max(1, lidar_rays), compile_physics=compile_physics)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         kinds = {"core": CORE_KINDS, "all": ALL_KINDS, "none": ()}[subscribe]
@@ -165,6 +171,7 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
                 node.phases = None
                 row = _row(run_id, scenario, scenario_kwargs, lidar_rays, num_envs, window - warmup, duration, steps, wall,
                            cpu, phases)
+                row["compiled"] = compile_physics
                 bar.set_postfix_str(f"{row['steps_per_s']:.0f} steps/s" + (" (warm-up)" if window < warmup else ""))
                 bar.update(1)
                 if window >= warmup:
@@ -254,7 +261,8 @@ def run_node_bench_command(args: argparse.Namespace) -> int:
                    lidar_rays=getattr(args, "lidar_rays", 12), num_envs=getattr(args, "node_num_envs", 1),
                    duration=getattr(args, "duration", 3.0), repeats=getattr(args, "repeats", 3),
                    warmup=getattr(args, "warmup", 1), subscribe=getattr(args, "subscribe", "core"),
-                   raw_subscriber=bool(getattr(args, "raw_subscriber", False)))
+                   raw_subscriber=bool(getattr(args, "raw_subscriber", False)),
+                   compile_physics=bool(getattr(args, "compile_physics", False)))
     from vmas_ros.bench.timing import pinned_threads
 
     try:

@@ -50,6 +50,17 @@ class Snapshot:
     rot: np.ndarray  # [N]
     ang_vel: np.ndarray  # [N]
     scans: Dict[int, List[np.ndarray]]  # agent index -> one array per lidar
+    #: everything above in one host array: the state's 6 N values, then every scan (see all_finite)
+    host: Optional[np.ndarray] = None
+    n_state: int = 0
+
+    def all_finite(self) -> bool:
+        """No NaN or inf in the state and no NaN in a scan (an unhit ray may read inf): two passes in all."""
+        if self.host is None:
+            return bool(np.isfinite(self.pos).all() and np.isfinite(self.vel).all() and np.isfinite(self.rot).all()
+                        and np.isfinite(self.ang_vel).all()
+                        and not any(np.isnan(s).any() for ss in self.scans.values() for s in ss))
+        return bool(np.isfinite(self.host[: self.n_state]).all() and not np.isnan(self.host[self.n_state:]).any())
 
     @staticmethod
     def take(world, env_index: int, lidars: Dict[int, list],
@@ -59,16 +70,15 @@ class Snapshot:
         ``measurements`` (agent index -> one [B, R] tensor per lidar) are readings taken
         already this step; without them every lidar measures now.
         """
-        entities = world.entities
         with torch.no_grad():
             if measurements is None:
                 measurements = {i: [s.measure() for s in sensors] for i, sensors in lidars.items()}
-            # right after a step the stacks are the physics output itself (world.stacked_state)
-            state = torch.cat([world.stacked_state(name)[:, env_index].reshape(len(entities), -1)
-                               for name in ("pos", "vel", "rot", "ang_vel")], dim=1)
+            # the physics step's own planar state (right after a step: its output, no copy)
+            q, v = world.planar_state()
+            state = torch.cat([q[:, :, env_index], v[:, :, env_index]])  # [6, N]: x, y, angle, vx, vy, wz
             readings = [m[env_index].reshape(-1) for i in measurements for m in measurements[i]]
             host = torch.cat([state.reshape(-1)] + [r.to(state.dtype) for r in readings]).cpu().numpy()
-        state = host[: state.numel()].reshape(len(entities), -1)
+        state = host[: state.numel()].reshape(6, -1)
         scans, offset = {}, state.size
         for i, tensors in measurements.items():
             scans[i] = []
@@ -76,7 +86,7 @@ class Snapshot:
                 n = m.shape[-1]
                 scans[i].append(host[offset: offset + n])
                 offset += n
-        return Snapshot(state[:, 0:2], state[:, 2:4], state[:, 4], state[:, 5], scans)
+        return Snapshot(state[0:2].T, state[3:5].T, state[2], state[5], scans, host, state.size)
 
 
 def set_pose(pose, x: float, y: float, yaw: float) -> None:

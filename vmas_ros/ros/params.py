@@ -36,6 +36,7 @@ class SimParams:
     num_envs: int = 1
     env_index: int = 0
     device: str = "cpu"
+    compile_physics: bool = False
     seed: int = 0
     rate_hz: float = 0.0
     real_time_factor: float = 1.0

@@ -75,7 +75,6 @@ class StateMessages:
         from sensor_msgs.msg import LaserScan
 
         self.n_landmarks, self.n_entities = n_landmarks, n_entities
-        n_agents = len(agent_names)
         self._twist_base = 4 * n_entities  # float64 values: entity (x, y, qz, qw), then agent body (vx, vy, wz)
         templates: List[_Template] = []
         clock = _Template("/clock", Clock(), stamps=["clock"])
@@ -306,6 +305,7 @@ class LidarReadings:
         self.lidars = lidars
         self._marks: Optional[Dict[int, list]] = None
         self._batched = BatchedLidars()
+        self._compiled: Dict[tuple, object] = {}  # per group: a CompiledCast, for worlds that compile their physics
 
     def mark(self) -> None:
         self._marks = {i: [s.last_measurement for s in sensors] for i, sensors in self.lidars.items()}
@@ -326,8 +326,15 @@ class LidarReadings:
         groups: Dict[tuple, list] = {}  # lidars of one ray count and range are cast together
         for entry in stale:
             groups.setdefault((entry[2].n_rays, float(entry[2].max_range)), []).append(entry)
-        for group in groups.values():
-            batched = self._batched.cast(world, [s for _, _, s in group])
+        for key, group in groups.items():
+            sensors = [s for _, _, s in group]
+            batched = None
+            if world.physics_compiled:  # one compiled cast (equal to measure() to float rounding)
+                from vmas_ros.simulator.lidar_batch import CompiledCast
+
+                batched = self._compiled.setdefault(key, CompiledCast()).cast(world, sensors)
+            if batched is None:
+                batched = self._batched.cast(world, sensors)
             for k, (i, j, sensor) in enumerate(group):
                 readings[i][j] = batched[k] if batched is not None else sensor.measure()
         return readings

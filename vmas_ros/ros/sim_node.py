@@ -162,6 +162,10 @@ class SimNode(Node):
                     ))
         self.policy = make_heuristic(p.scenario, **p.kwargs())
         self.obs = self.env.reset()
+        if p.compile_physics:
+            # the step and its LIDAR casts through torch.compile; compiled on the first step (seconds)
+            world.compile_physics()
+            self.get_logger().info("compile_physics: the first step compiles the step (a few seconds on a CPU)")
 
     def _build_io(self) -> None:
         world = self.env.world
@@ -421,8 +425,7 @@ class SimNode(Node):
 
     def _check_finite(self, snap) -> None:
         """Refuse (SimulationFault) a NaN/inf pose or velocity, or a NaN scan, before any is published."""
-        if np.isfinite(snap.pos).all() and np.isfinite(snap.vel).all() and np.isfinite(snap.rot).all() \
-                and np.isfinite(snap.ang_vel).all() and not any(np.isnan(s).any() for ss in snap.scans.values() for s in ss):
+        if snap.all_finite():
             return
         entities = self.env.world.entities
         bad = [entities[k].name for k in range(len(entities))

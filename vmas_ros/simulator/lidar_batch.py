@@ -160,9 +160,7 @@ class AgentLidars:
         self._batched = BatchedLidars()
         self._key: Optional[torch.Tensor] = None
         self._readings: List[torch.Tensor] = []
-        #: compiled worlds cast all lidars as one compiled function of the planar state (see lidar_kernel):
-        #: (the world layout it was planned for, its WorldKernel), planned on the first compiled cast
-        self._compiled_plan: Optional[tuple] = None
+        self._compiled = CompiledCast()  # compiled worlds: all lidars as one compiled function of the state
 
     def reading(self, agent) -> torch.Tensor:
         """``agent``'s lidar distances ``[B, n_rays]`` in the current state."""
@@ -176,7 +174,7 @@ class AgentLidars:
         world = self._world
         readings = None
         if world.physics_compiled and world.batch_dim * self._sensors[0].n_rays <= COMPILED_BATCH_BELOW_ELEMENTS:
-            readings = self._compiled_cast()
+            readings = self._compiled.cast(world, self._sensors)
         if readings is None and world.batch_dim * self._sensors[0].n_rays <= BATCH_BELOW_ELEMENTS:
             readings = self._batched.cast(world, self._sensors, keep_grad=True)
         if readings is None:
@@ -185,31 +183,35 @@ class AgentLidars:
             sensor._last_measurement = measured
         return readings
 
-    def _layout(self) -> tuple:
-        """(the world's entities, each lidar's targets) as ids: what a compiled cast's row indices assume."""
-        world = self._world
-        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in self._sensors)
-        return tuple(id(e) for e in world.entities), targets
 
-    def _compiled_cast(self) -> Optional[List[torch.Tensor]]:
-        """Every lidar's reading from one compiled :func:`lidar_kernel` call, or None when it cannot cast them.
+class CompiledCast:
+    """Several lidars cast by one compiled :func:`lidar_kernel` call (worlds that compile their physics).
 
-        One compiled call instead of one per lidar, each with a dozen calls of
-        Python around its compiled kernel (discovery at 1,000 envs: 5 casts,
-        ~100 us each, against ~30 us for all five in one graph). Entity
-        filters may depend on the state, and entities may be added, so the
-        layout is checked on every cast and a change plans again.
-        """
-        world = self._world
-        layout = self._layout()
-        if self._compiled_plan is None or self._compiled_plan[0] != layout:
-            constants = _kernel_constants(world, self._sensors, layout[1])
+    One compiled call instead of one per lidar, each with a dozen calls of
+    Python around its compiled kernel (discovery at 1,000 envs: 5 casts,
+    ~100 us each, against ~30 us for all five in one graph). Entity filters
+    may depend on the state, and entities may be added, so the layout is
+    checked on every cast and a change plans (and compiles) again.
+    """
+
+    def __init__(self) -> None:
+        self._plan: Optional[tuple] = None  # (layout it was planned for, WorldKernel or None)
+
+    def cast(self, world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
+        """Readings ``[B, R]`` of ``sensors``, or None when they cannot be cast together (see :func:`_kernel_constants`)."""
+        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
+        layout = (tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
+        if self._plan is None or self._plan[0] != layout:
+            constants = _kernel_constants(world, sensors, targets)
             kernel = None if constants is None else WorldKernel(world, functools.partial(lidar_kernel, **constants))
-            self._compiled_plan = (layout, kernel)
-        kernel = self._compiled_plan[1]
+            self._plan = (layout, kernel)
+        kernel = self._plan[1]
         if kernel is None:
             return None
-        return list(kernel(world.planar_state()[0]).unbind(0))
+        readings = list(kernel(world.planar_state()[0]).unbind(0))
+        for sensor, reading in zip(sensors, readings):
+            sensor._last_measurement = reading
+        return readings
 
 
 def _kernel_constants(world, sensors: Sequence, targets: tuple) -> Optional[dict]:
