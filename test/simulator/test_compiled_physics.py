@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import vmas_ros
+from vmas_ros.simulator import physics
 
 STEPS = 8
 
@@ -120,3 +121,31 @@ def test_world_kernel_follows_the_world_and_equals_eager(device):
     compiled = kernel(q, v)
     assert counters["stats"]["unique_graphs"] == graphs + 1
     torch.testing.assert_close(compiled, eager, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_compiled_step_with_more_pairs_than_a_dense_scatter_equals_eager(device):
+    """Above GEMM_SCATTER_MAX_CELLS the compiled step scatters through the opaque scatter_rows op."""
+    import math
+
+    from vmas_ros.simulator.core import Agent, Sphere, World
+
+    n, batch = 40, 3
+    assert n * (n * (n - 1) // 2) > physics.GEMM_SCATTER_MAX_CELLS
+    worlds = []
+    for compiled in (False, True):
+        world = World(batch_dim=batch, device=device)
+        if compiled:
+            world.compile_physics()
+        for i in range(n):
+            world.add_agent(Agent(name=f"s{i}", shape=Sphere(0.05)))
+        gen = torch.Generator().manual_seed(0)
+        for agent in world.agents:
+            agent.set_pos(((torch.rand(batch, 2, generator=gen) - 0.5) * 0.1 * math.sqrt(n)).to(device), batch_index=None)
+        worlds.append(world)
+    for _ in range(3):
+        for world in worlds:
+            world.step()
+    eager, compiled = (w.stacked_state("vel") for w in worlds)
+    assert eager.abs().max() > 0.01, "the spheres overlap and push each other"
+    torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
