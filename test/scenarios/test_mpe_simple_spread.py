@@ -25,8 +25,8 @@ def test_many_envs_path_equals_few_envs_path(n_agents, obs_agents, device, monke
         agent.set_pos(((torch.rand(BATCH, 2, generator=gen) - 0.5) * 0.6).to(device), batch_index=None)
     env.step([torch.rand(BATCH, 2, generator=gen).to(device) * 2 - 1 for _ in env.agents])
     scenario = env.scenario
-    many_rew, many_obs = scenario._reward_many_envs(), scenario._observations().clone()
-    scenario._obs_cache = None
+    many_rew = scenario._reward_many_envs()
+    many_obs = torch.stack([scenario.observation(agent) for agent in env.agents])
     monkeypatch.setattr(simple_spread, "FEW_ENVS", 10 ** 9)
     few_rew, few_obs = scenario._reward_few_envs(), scenario._observations()
     assert torch.equal(many_obs, few_obs)
@@ -43,6 +43,6 @@ def test_many_envs_observations_carry_gradients(device):
     env.reset()
     start = env.agents[1].state.pos.clone().requires_grad_(True)
     env.agents[1].set_pos(start, batch_index=None)
-    observations = env.scenario._observations()
+    observations = [env.scenario.observation(agent) for agent in env.agents]
     observations[0].sum().backward()  # agent 0 sees agent 1 relative to itself: d/d(start) = 1 per coordinate
     assert torch.equal(start.grad, torch.ones_like(start))

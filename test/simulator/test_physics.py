@@ -438,3 +438,30 @@ def test_pair_scatter_by_gemm_equals_index_add(batch, device, monkeypatch):
         torch.testing.assert_close(got, expected, rtol=1e-5, atol=1e-5)
     assert physics.scatter_by_gemm(n, len(pairs), batch)
     assert not physics.scatter_by_gemm(n, physics.GEMM_SCATTER_MAX_CELLS, batch), "too large for a dense matrix"
+    # a few pairs over many envs: index_add_ (as fast, without the BLAS kernel's resident code); at a few envs the GEMM
+    few = physics.GEMM_SCATTER_MIN_PAIRS - 1
+    assert physics.scatter_by_gemm(n, few, batch) == (batch < physics.SCATTER_TRANSPOSE_BELOW)
+
+
+def test_no_dense_incidence_beyond_the_gemm_cap(device):
+    """Worlds with more (entity, pair) cells than a GEMM scatter may use build no dense incidence matrix
+    (1,000 spheres once allocated 6 GB of them at the first step); small ones build theirs up front."""
+    from vmas_ros.simulator import physics
+    from vmas_ros.simulator.core import Agent, Sphere, World
+
+    def stepped(n):
+        world = World(batch_dim=2, device=device)
+        for i in range(n):
+            world.add_agent(Agent(name=f"s{i}", shape=Sphere(0.05)))
+        world.reset(None)
+        world.step()
+        return world.tables.pairs[0]
+
+    big = stepped(60)
+    assert 60 * len(big.index_a) > physics.GEMM_SCATTER_MAX_CELLS
+    assert not big.__dict__.get("_incidence")
+    small = stepped(4)
+    assert set(small.__dict__["_incidence"]) == {(4, torch.float32), ("opposite", 4, torch.float32)}
+    first, second = small.incidence_ab(4, torch.float32)
+    assert first.shape == (4, 6) and torch.equal(first.sum(0), torch.ones(6)) and torch.equal(second.sum(0), torch.ones(6))
+    assert torch.equal(first.argmax(0).cpu(), small.index_a.cpu()) and torch.equal(second.argmax(0).cpu(), small.index_b.cpu())

@@ -6,6 +6,7 @@ from enum import Enum
 from typing import Any, Dict, Optional, Tuple, Union
 
 from vmas_ros.envs.environment import Environment
+from vmas_ros.simulator import core as _engine  # noqa: F401  every env needs the engine: load it with make_env
 from vmas_ros.simulator.scenario import BaseScenario
 
 #: wrapper name -> (module, class), imported only when asked for: ``import vmas_ros``

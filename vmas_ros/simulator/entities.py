@@ -152,8 +152,8 @@ class Entity(_Batched, Observable):
     def _batched_parts(self) -> list:
         return [self._state]
 
-    def _reset(self, env_index) -> None:
-        self._state._reset(env_index)
+    def _reset(self, env_index, stored: bool = True) -> None:
+        self._state._reset(env_index, stored)
 
     def zero_grad(self) -> None:
         self._state.zero_grad()
@@ -350,10 +350,10 @@ class Agent(Entity):
         if u is None or u.shape[1] != self.action_size:
             raise ValueError(f"action script of {self._name!r} must set action.u with {self.action_size} columns")
 
-    def _reset(self, env_index) -> None:
+    def _reset(self, env_index, stored: bool = True) -> None:
         self._action._reset(env_index)
         self.dynamics.reset(env_index)
-        super()._reset(env_index)
+        super()._reset(env_index, stored)
 
     def zero_grad(self) -> None:
         self._action.zero_grad()

@@ -53,6 +53,9 @@ SCATTER_TRANSPOSE_BELOW = 16
 #: (entity, pair) cells (see scatter_by_gemm)
 GEMM_SCATTER_MAX_CELLS = 1 << 14
 
+#: eager steps over many envs scatter by GEMM only from this many pairs of one kernel (see scatter_by_gemm)
+GEMM_SCATTER_MIN_PAIRS = 8
+
 #: up to this many state elements the step keeps held entities still with one ``torch.where`` (per-call
 #: cost dominates); above, by copying their rows back (``torch.where`` is slow per element on the CPU)
 SMALL_BATCH_ELEMENTS = 8192
@@ -285,13 +288,16 @@ def scatter_by_gemm(n_entities: int, n_pairs: int, batch: int) -> bool:
     ``torch.compile`` lowers to a serial scatter of atomic adds (3.5 ms per
     substep for flocking at 10,000 envs, ~30x its eager time); a GEMM is one
     vectorised, multi-threaded call everywhere. With one thread and many envs
-    ``index_add_`` is faster (1.6x at 10,000 envs). The GEMM sums in its own
-    order, so kernels that promise VMAS's summation order use it only when
-    compiled (see :func:`_add_pairs`).
+    ``index_add_`` is faster (1.6x at 10,000 envs), and with a few pairs over
+    many envs the two run level (simple_spread's 3 pairs at 30,000 envs, 2
+    threads), so there the BLAS kernel is not worth its ~1 MB of resident code.
+    The GEMM sums in its own order, so kernels that promise VMAS's summation
+    order use it only when compiled (see :func:`_add_pairs`).
     """
     if n_entities * n_pairs > GEMM_SCATTER_MAX_CELLS:
         return False
-    return torch.compiler.is_compiling() or batch < SCATTER_TRANSPOSE_BELOW or torch.get_num_threads() > 1
+    return (torch.compiler.is_compiling() or batch < SCATTER_TRANSPOSE_BELOW
+            or (n_pairs >= GEMM_SCATTER_MIN_PAIRS and torch.get_num_threads() > 1))
 
 
 def _add_pairs(force: Tensor, table, on_a: Tensor, on_b: Tensor) -> None:
@@ -419,8 +425,9 @@ def step_constants(tables: WorldTables, params: StepParams) -> dict:
     n_entities = tables.n_entities
     contacts._zero(mass)
     for table in tables.pairs + ([tables.joints] if tables.joints is not None else []):
-        table.incidence_ab(n_entities, mass.dtype)
-        table.incidence_opposite(n_entities, mass.dtype)
+        if n_entities * len(table.index_a) <= GEMM_SCATTER_MAX_CELLS:  # never used above (1,000 spheres: 6 GB)
+            table.incidence_ab(n_entities, mass.dtype)
+            table.incidence_opposite(n_entities, mass.dtype)
         table.index_ab
         if table in tables.pairs and table.kind == ("sphere", "sphere"):
             table.contact_distance

@@ -144,6 +144,23 @@ class EntityState(_Batched):
                 self.__dict__["_" + name] = self._store.part(name, self._slot)
                 self.__dict__["_" + name + "_gen"] = gen
 
+    def _set_since_adopt(self, name: str) -> Optional[Tensor]:
+        """The tensor this entity was given for ``name`` since the store's last adopt, or None (it reads the store)."""
+        return self.__dict__["_" + name] if self.__dict__["_" + name + "_gen"] == self._store.gen else None
+
+    def _drop_consumed(self) -> None:
+        """Let go of fields set before the store's last step: the step consumed them (they are stale).
+
+        The getter does the same lazily, but a field nobody reads after the
+        step would keep its old tensor alive until the next setter (at 30,000
+        envs, a reset's positions for three agents hold 2 MB through every
+        later step).
+        """
+        gen = self._store.gen
+        for name in STORED_FIELDS:
+            if self.__dict__["_" + name + "_gen"] != gen:
+                self.__dict__["_" + name] = None
+
     def _join(self, store: StateStore, slot: int) -> None:
         """Read from ``store`` at row ``slot`` from now on (the caller released the previous store)."""
         self._take_from_store()
@@ -164,8 +181,10 @@ class EntityState(_Batched):
         else:
             setattr(self, "_" + name, value)
 
-    def _reset(self, env_index) -> None:
-        for name in self._fields:
+    def _reset(self, env_index, stored: bool = True) -> None:
+        """Zero every field in ``env_index`` (all envs when None); ``stored=False`` leaves pos/vel/rot/ang_vel
+        alone (``World.reset`` zeroes those of all entities at once in its state store)."""
+        for name in self._fields if stored else self._fields[len(STORED_FIELDS):]:
             value = getattr(self, name)
             if value is None:
                 continue

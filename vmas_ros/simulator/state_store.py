@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional, Tuple
 
+import torch
 from torch import Tensor
 
 from vmas_ros.simulator.layout import join_xy
@@ -59,6 +60,8 @@ class StateStore:
         self._pos_version = self._vel_version = 0
         #: True when some entity may differ from ``q``/``v`` (a setter ran, or there is no step output)
         self.dirty = True
+        #: (shape, device) of an all-zero state not allocated yet (see :meth:`adopt_zeros`), else None
+        self._zeros: Optional[tuple] = None
 
     # ------------------------------------------------------------ ownership
     def adopt(self, q: Tensor, v: Tensor) -> None:
@@ -68,7 +71,37 @@ class StateStore:
         self._versions = (q._version, v._version)
         self._stacks = {}
         self._pos = self._vel = None
+        self._zeros = None
         self.dirty = False
+
+    def adopt_zeros(self, shape: Tuple[int, int, int], device) -> None:
+        """Make every entity's state zero (``World.reset`` of all envs), allocating it only when read.
+
+        A reset is usually followed by the scenario setting positions, so the
+        next step rebuilds its state from the entities anyway; until then a
+        zero state nobody reads would be two ``[3, N, B]`` tensors held for
+        nothing (4 MB at 30,000 envs, right at the first step's peak).
+        Rebuilding knows which fields are still zero (:attr:`zeroed`).
+        """
+        self.gen += 1
+        self._q = self._v = None
+        self._stacks = {}
+        self._pos = self._vel = None
+        self._zeros = (tuple(shape), device)
+        self.dirty = False
+
+    @property
+    def zeroed(self) -> bool:
+        """Whether every field an entity has not set since the last adopt is zero, with nothing allocated."""
+        return self._zeros is not None
+
+    def _materialize(self) -> None:
+        """Allocate the zero state of :meth:`adopt_zeros` (same generation: the values do not change)."""
+        shape, device = self._zeros
+        q = torch.zeros(shape, device=device)
+        self._q, self._v = q, torch.zeros_like(q)
+        self._versions = (self._q._version, self._v._version)
+        self._zeros = None
 
     def release(self, states: List["object"]) -> None:
         """Hand every field still held here to its entity (``states``: the entities' states), then let go.
@@ -76,6 +109,8 @@ class StateStore:
         For changes that invalidate the layout (entities added, a device move):
         afterwards every entity owns plain tensors and the store is dirty.
         """
+        if self._zeros is not None:
+            self._materialize()
         if self._q is not None:
             for state in states:
                 state._take_from_store()
@@ -97,6 +132,8 @@ class StateStore:
         """
         if self.dirty:
             return False
+        if self._zeros is not None:
+            return True
         if (self._q._version != self._versions[0] or self._v._version != self._versions[1]
                 or (self._pos is not None and self._pos._version != self._pos_version)
                 or (self._vel is not None and self._vel._version != self._vel_version)):
@@ -115,6 +152,8 @@ class StateStore:
         fetches fresh views (no entity holds an override while the store is
         clean, so none is lost).
         """
+        if self._zeros is not None:
+            self._materialize()
         q = self._q.clone()
         q[0, lo:hi] = x
         q[1, lo:hi] = y
@@ -123,6 +162,8 @@ class StateStore:
     # -------------------------------------------------------------- reading
     def planar(self) -> Tuple[Tensor, Tensor]:
         """``q``, ``v`` of the last step (only meaningful while :meth:`clean`)."""
+        if self._zeros is not None:
+            self._materialize()
         return self._q, self._v
 
     def stack(self, name: str) -> Tensor:
@@ -143,6 +184,8 @@ class StateStore:
         return parts[slot]
 
     def _build(self, name: str) -> list:
+        if self._zeros is not None:
+            self._materialize()
         q, v = self._q, self._v
         if name == "pos":
             stack = join_xy(q[0], q[1])

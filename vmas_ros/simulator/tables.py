@@ -34,9 +34,9 @@ _KIND_ORDER = {"box": 0, "line": 1, "sphere": 2}
 def incidence(index: Tensor, n_entities: int, dtype: torch.dtype) -> Tensor:
     """``[N, P]`` 0/1 matrix with a 1 at (index[p], p): ``M @ values`` adds each pair's ``[P, B]`` value
     onto its entity (a scatter as one GEMM; see physics.scatter_by_gemm)."""
-    matrix = torch.zeros(n_entities, index.numel(), device=index.device, dtype=dtype)
-    matrix[index, torch.arange(index.numel(), device=index.device)] = 1.0
-    return matrix
+    members = index.tolist()  # built once per layout, in Python: a few hundred cells at most (see physics)
+    rows = [[1.0 if member == entity else 0.0 for member in members] for entity in range(n_entities)]
+    return torch.tensor(rows, device=index.device, dtype=dtype).reshape(n_entities, len(members))
 
 
 class _Incidence:

@@ -53,6 +53,20 @@ def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.St
     return new, tuple(kernel(new.q, new.v) for kernel in kernels)
 
 
+def _planar_over_zeros(given: List[List[Optional[Tensor]]], n: int, batch: int, device) -> physics.PlanarState:
+    """The planar state of a zeroed store: zero but for the fields entities were given since
+    (``given``: per field pos, rot, vel, ang_vel, per entity the tensor or None)."""
+    q, v = torch.zeros(3, n, batch, device=device), torch.zeros(3, n, batch, device=device)
+    for rows, field in ((q[:2], given[0]), (q[2:], given[1]), (v[:2], given[2]), (v[2:], given[3])):
+        present = [i for i, t in enumerate(field) if t is not None]
+        if len(present) == n:
+            torch.stack(field, out=rows.permute(1, 2, 0))
+        else:
+            for i in present:
+                rows[:, i].copy_(field[i].t())
+    return physics.PlanarState(q, v)
+
+
 #: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
 #: (spheres: the nearest hit over the targets; boxes and lines: per target)
 _EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_nearest_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
@@ -217,7 +231,18 @@ class World(RayQueries, ActionInputs, StateAccess):
         return self._tables
 
     def reset(self, env_index) -> None:
-        for e in self.entities:
+        """Zero every entity's state (and agents' actions) in env ``env_index``, or in all envs when None."""
+        entities = self.entities
+        if env_index is None and entities:
+            # all envs: the store takes a zero state for every entity's pos/vel/rot/ang_vel (allocated when
+            # read; a rebuild fills only what the scenario set) instead of four fresh tensors per entity
+            self._store.adopt_zeros((3, len(entities), self._batch_dim), self._device)
+            self._stacks, self._xy_splits = {}, {}
+            for e in entities:
+                e.state._drop_consumed()
+                e._reset(None, stored=False)
+            return
+        for e in entities:
             e._reset(env_index)
 
     def zero_grad(self) -> None:
@@ -289,11 +314,12 @@ class World(RayQueries, ActionInputs, StateAccess):
         if not entities:
             return
         store = self._store
-        if store.clean():
+        rebuilt = not store.clean()
+        if rebuilt:  # stacked from the entities, or the stack planar_state() built since they last changed
+            state = physics.PlanarState(*self.planar_state())
+        else:
             state = physics.PlanarState(*store.planar())
             store.drop_views()
-        else:
-            state = self._planar_from_entities(entities)
         # what was stacked from the old state is stale once the step runs: freed before the step's
         # own tensors are allocated (peak memory)
         self._stacks, self._xy_splits = {}, {}
@@ -310,6 +336,9 @@ class World(RayQueries, ActionInputs, StateAccess):
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
         store.adopt(new.q, new.v)
+        if rebuilt:  # the entities' own tensors went into this step: drop them (see EntityState._drop_consumed)
+            for entity in entities:
+                entity.state._drop_consumed()
         self._kernel_outputs = (store.gen, list(outputs))
         if self._dim_c > 0:
             for agent in self._agents:
@@ -317,12 +346,32 @@ class World(RayQueries, ActionInputs, StateAccess):
                     agent.state._c = agent.action.c
 
     def _planar_from_entities(self, entities: List[Entity]) -> physics.PlanarState:
-        """The physics state ``[3, N, B]`` (q and v) stacked from the entities' own tensors."""
-        out = []
-        for lin, ang in (("pos", "rot"), ("vel", "ang_vel")):
-            linear = split_xy_stacked(torch.stack([getattr(e.state, lin) for e in entities]))
-            out.append(torch.cat([linear, torch.stack([getattr(e.state, ang) for e in entities])[..., 0].unsqueeze(0)]))
-        return physics.PlanarState(*out)
+        """The physics state ``[3, N, B]`` (q and v) stacked from the entities' own tensors.
+
+        Without a gradient to keep, each field is stacked straight into its
+        rows of the new state (``stack(out=)`` into a permuted view): no
+        temporaries, and at 30,000 envs 0.15 ms per field instead of 1.8 ms
+        through a stacked copy and a split (which also left 8 MB of freed
+        blocks scattered through the heap after every reset).
+        """
+        names = ("pos", "rot", "vel", "ang_vel")
+        if self._store.zeroed:  # after a reset: only what was set since is not zero
+            given = [[e.state._set_since_adopt(name) for e in entities] for name in names]
+            if not (torch.is_grad_enabled() and any(t is not None and t.requires_grad for f in given for t in f)):
+                return _planar_over_zeros(given, len(entities), self._batch_dim, self._device)
+        fields = [[getattr(e.state, name) for e in entities] for name in names]
+        if torch.is_grad_enabled() and any(t.requires_grad for field in fields for t in field):
+            out = []
+            for linear, angular in (fields[:2], fields[2:]):
+                xy = split_xy_stacked(torch.stack(linear))
+                out.append(torch.cat([xy, torch.stack(angular)[..., 0].unsqueeze(0)]))
+            return physics.PlanarState(*out)
+        reference = fields[0][0]
+        q, v = (reference.new_empty(3, len(entities), reference.shape[0]) for _ in range(2))
+        for state, (linear, angular) in ((q, fields[:2]), (v, fields[2:])):
+            torch.stack(linear, out=state[:2].permute(1, 2, 0))
+            torch.stack(angular, out=state[2].unsqueeze(-1))
+        return physics.PlanarState(q, v)
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""

@@ -28,8 +28,9 @@ class ActionInputs:
         lists for the compiled step to assemble in its own graph."""
         if tables.n_agents == 0:
             return q.new_zeros(q.shape)
-        if self.physics_compiled and not (tables.limits_force or tables.limits_torque or self._fixed_agents(tables)):
-            return ([a.state._force for a in self._agents], [a.state._torque for a in self._agents])
+        if not (tables.limits_force or tables.limits_torque or self._fixed_agents(tables)):
+            lists = ([a.state._force for a in self._agents], [a.state._torque for a in self._agents])
+            return lists if self.physics_compiled else assemble_actions(q, tables, *lists)
         agent_force, agent_torque = self._agent_actions(tables)
         return assemble_actions(q, tables, agent_force, agent_torque)
 
@@ -74,9 +75,14 @@ def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
     n_agents = tables.n_agents
     if n_agents == 0:
         return actions
-    if isinstance(forces, (list, tuple)):
-        forces, torques = torch.stack(forces), torch.stack(torques)
     rows = actions[:, tables.n_entities - n_agents:]  # the agents' [3, A, B] block (landmarks stay zero)
+    if isinstance(forces, (list, tuple)):
+        if not torch.compiler.is_compiling() and not physics._differentiable(*forces, *torques):
+            # each agent's force and torque stacked straight into its rows (no stacks of the batch)
+            torch.stack(forces, out=rows[:2].permute(1, 2, 0))
+            torch.stack(torques, out=rows[2].unsqueeze(-1))
+            return actions
+        forces, torques = torch.stack(forces), torch.stack(torques)
     if q.numel() <= physics.SMALL_BATCH_ELEMENTS or torch.compiler.is_compiling():
         # few elements: each call's fixed cost dominates; one strided copy (and the compiler's choice)
         rows[:2].copy_(forces.permute(2, 0, 1))

@@ -20,8 +20,9 @@ from vmas_ros.simulator.layout import join_xy, split_xy_stacked
 
 
 def _unchanged(parts: List[Tensor], versions: List[int], current: List[Tensor]) -> bool:
-    """Whether ``current`` are the very tensors ``parts``, none written in place since ``versions``."""
-    return len(parts) == len(current) and all(a is b and a._version == v for a, b, v in zip(parts, current, versions))
+    """Whether ``current`` are the very tensors ``parts`` (or Nones), none written in place since ``versions``."""
+    return len(parts) == len(current) and all(
+        a is b and (a is None or a._version == v) for a, b, v in zip(parts, current, versions))
 
 
 
@@ -133,10 +134,15 @@ class StateAccess:
         store = self._store
         if store.clean():
             return store.planar()
-        current = [getattr(e.state, f) for f in ("pos", "rot", "vel", "ang_vel") for e in self.entities]
+        fields = ("pos", "rot", "vel", "ang_vel")
+        if store.zeroed:  # after a reset: what entities were given since (None: still zero), read nothing else
+            current = [e.state._set_since_adopt(f) for f in fields for e in self.entities]
+        else:
+            current = [getattr(e.state, f) for f in fields for e in self.entities]
         cached = self._stacks.get("planar")
-        if cached is not None and _unchanged(cached[0], cached[1], current):
+        if cached is not None and cached[3] == store.gen and _unchanged(cached[0], cached[1], current):
             return cached[2]
         state = self._planar_from_entities(self.entities)
-        self._stacks["planar"] = (current, [t._version for t in current], (state.q, state.v))
+        versions = [None if t is None else t._version for t in current]
+        self._stacks["planar"] = (current, versions, (state.q, state.v), store.gen)
         return state.q, state.v
