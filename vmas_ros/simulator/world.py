@@ -18,7 +18,7 @@ from torch import Tensor
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
-from vmas_ros.simulator.compiling import compile_for_world
+from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
 from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.shapes import Box, Line, Sphere
@@ -65,6 +65,14 @@ def _planar_over_zeros(given: List[List[Optional[Tensor]]], n: int, batch: int, 
             for i in present:
                 rows[:, i].copy_(field[i].t())
     return physics.PlanarState(q, v)
+
+
+def _step_layout(state, tables, params: physics.StepParams, actions, fixed_rotation, kernels) -> tuple:
+    """What a compiled step bakes in besides its tables (see ``LayoutCompiled``): the step parameters, the
+    form of the action input, whether joints have target angles, and which state kernels ride along."""
+    return (params.dt, params.substeps, params.collision_force, params.joint_force, params.torque_constraint_force,
+            params.contact_margin, params.x_semidim, params.y_semidim, params.broad_phase,
+            isinstance(actions, tuple), fixed_rotation is None, tuple(id(kernel) for kernel in kernels))
 
 
 #: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
@@ -170,7 +178,9 @@ class World(RayQueries, ActionInputs, StateAccess):
             self._physics_step = _advance
             self._ray_kernels = _EAGER_RAY_KERNELS
             return
-        self._physics_step = compile_for_world(_advance, mode)
+        # one compiled copy per layout, checking only the state and the actions on each call (LayoutCompiled)
+        self._physics_step = LayoutCompiled(_advance, mode, key=_step_layout,
+                                            checked=("state.", "actions", "fixed_rotation"))
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
         self._ray_kernels = {kind: compile_for_world(fn, mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
@@ -332,7 +342,10 @@ class World(RayQueries, ActionInputs, StateAccess):
         # state kernels ride along in compiled steps only: eagerly, computing them when they are asked for
         # costs the same calls and keeps the step's own peak memory lower
         kernels = tuple(self._state_kernels) if self.physics_compiled else ()
-        new, outputs = self._physics_step(state, tables, params, actions, fixed_rotation, kernels)
+        if self._physics_step is _advance:
+            new, outputs = _advance(state, tables, params, actions, fixed_rotation, kernels)
+        else:  # keyed on the tables object: rebuilt whenever an entity or one of its properties changes
+            new, outputs = self._physics_step(tables, state, tables, params, actions, fixed_rotation, kernels)
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
         store.adopt(new.q, new.v)
