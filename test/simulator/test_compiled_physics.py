@@ -178,3 +178,26 @@ def test_compiled_step_checks_only_its_inputs_and_recompiles_for_a_new_layout(de
     assert compiled.world._physics_step._copies and copy not in compiled.world._physics_step._copies.values()
     moved = [env.agents[0].state.pos.clone() for env in (eager, compiled)]
     torch.testing.assert_close(moved[1], moved[0], atol=1e-5, rtol=1e-4)
+
+
+@pytest.mark.slow
+def test_world_kernels_check_only_their_arguments(device):
+    """A WorldKernel (here a lidar cast: a partial with a dozen bound tensors) is guarded on its arguments
+    only; its bound constants are read afresh but not checked on each call."""
+    import functools
+
+    from torch._dynamo.eval_frame import _debug_get_cache_entry_list
+    from vmas_ros.simulator.compiling import WorldKernel
+
+    env = vmas_ros.make_env("simple_spread", num_envs=3, device=device, seed=0, compile_physics=True)
+    bias = torch.ones(3, device=device)
+    kernel = WorldKernel(env.world, functools.partial(lambda q, bias: q[0] + bias, bias=bias))
+    q = env.world.planar_state()[0]
+    torch.testing.assert_close(kernel(q), q[0] + 1)
+    bias.fill_(2.0)  # read afresh: the constant's current value
+    torch.testing.assert_close(kernel(q), q[0] + 2)
+    code = (getattr(kernel._compiled, "_torchdynamo_orig_callable", None) or kernel._compiled.__wrapped__).__code__
+    guards = str(_debug_get_cache_entry_list(code)[0].guard_manager)
+    assert "keywords" not in guards and "args'][0]" in guards, guards
+    with pytest.raises(ValueError, match="no state kernel 5"):
+        env.world.replace_state_kernel(5, None)

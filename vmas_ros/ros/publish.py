@@ -30,6 +30,9 @@ from builtin_interfaces.msg import Time
 from vmas_ros.ros import convert
 from vmas_ros.ros.cdr import serialize_zeroed
 
+#: up to this many envs x rays the node's lidars are cast inside the compiled step (CompiledCast ride_along)
+RIDE_ALONG_MAX_ELEMENTS = 4096
+
 
 def type_name(message_type) -> str:
     """``pkg/msg/Name`` of a message class (e.g. sensor_msgs/msg/LaserScan)."""
@@ -332,7 +335,9 @@ class LidarReadings:
             if world.physics_compiled:  # one compiled cast (equal to measure() to float rounding)
                 from vmas_ros.simulator.lidar_batch import CompiledCast
 
-                batched = self._compiled.setdefault(key, CompiledCast()).cast(world, sensors)
+                # a few envs (the node's case): cast inside the compiled step itself (see CompiledCast)
+                ride = world.batch_dim * key[0] <= RIDE_ALONG_MAX_ELEMENTS
+                batched = self._compiled.setdefault(key, CompiledCast(ride_along=ride)).cast(world, sensors)
             if batched is None:
                 batched = self._batched.cast(world, sensors)
             for k, (i, j, sensor) in enumerate(group):

@@ -43,7 +43,7 @@ from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
 from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
 from vmas_ros.ros.topic_audit import TopicAudit
 from vmas_ros.scenarios import make_heuristic
-from vmas_ros.simulator.sensors import Lidar
+from vmas_ros.simulator.sensors import CollidesWith, Lidar
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
@@ -158,7 +158,7 @@ class SimNode(Node):
                 if not any(isinstance(s, Lidar) for s in agent.sensors):
                     agent.add_sensor(Lidar(
                         world, n_rays=p.lidar_rays, max_range=p.lidar_range,
-                        entity_filter=lambda e, me=agent: e.collides(me) and me.collides(e),
+                        entity_filter=CollidesWith(agent),
                     ))
         self.policy = make_heuristic(p.scenario, **p.kwargs())
         self.obs = self.env.reset()

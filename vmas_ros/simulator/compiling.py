@@ -11,6 +11,7 @@ of small tensor calls; on a GPU the same graphs are what CUDA graphs capture).
 from __future__ import annotations
 
 import functools
+import re
 import types
 from typing import Callable, Dict, Hashable, Optional, Sequence
 
@@ -36,14 +37,27 @@ def own_copy(fn: Callable) -> Callable:
     return copy
 
 
-def compile_for_world(fn: Callable, mode: Optional[str]) -> Callable:
-    """A compiled private copy of ``fn`` (fixed shapes: a new batch size compiles again)."""
-    return torch.compile(own_copy(fn), dynamic=False, mode=mode)
+def compile_for_world(fn: Callable, mode: Optional[str], arguments_only: bool = False) -> Callable:
+    """A compiled private copy of ``fn`` (fixed shapes: a new batch size compiles again).
+
+    ``arguments_only``: check only what is passed in on each call (see :func:`_direct_arguments`), for
+    pure functions whose other inputs (a partial's constants, a bound method's attributes) never change.
+    """
+    options = {"guard_filter_fn": _direct_arguments} if arguments_only else None
+    return torch.compile(own_copy(fn), dynamic=False, mode=mode, options=options)
 
 
 #: guards that cover process-wide state (grad mode, default device, ...): cheap, and never implied by a layout
 _GLOBAL_GUARDS = frozenset({"GRAD_MODE", "GLOBAL_STATE", "DEFAULT_DEVICE", "TORCH_FUNCTION_STATE",
                             "DETERMINISTIC_ALGORITHMS", "AUTOGRAD_SAVED_TENSORS_HOOKS", "SHAPE_ENV"})
+#: the guard source of an argument of the call itself: a parameter name, or a partial's ``args[i]``
+_ARGUMENT = re.compile(r"(args\[\d+\]|[A-Za-z_]\w*)")
+
+
+def _direct_arguments(entries) -> list:
+    """A ``guard_filter_fn`` keeping the guards on the call's own arguments and the global ones: not those
+    on a partial's bound constants or a bound method's attributes (a lidar kernel: 80 checks per call)."""
+    return [entry.guard_type in _GLOBAL_GUARDS or bool(_ARGUMENT.fullmatch(entry.name)) for entry in entries]
 
 
 def _guards_on(arguments: Sequence[str]) -> Callable:
@@ -94,8 +108,10 @@ class LayoutCompiled:
 class WorldKernel:
     """A pure tensor function of a scenario, compiled when (and only when) its world compiles its physics.
 
-    The function must not read mutable Python state that changes between
-    calls (guards would recompile on every change); pass tensors in instead.
+    The function must not read mutable state other than its arguments: once
+    compiled, only the arguments are checked on each call (a partial's bound
+    tensors and a bound method's attributes are read afresh but not checked,
+    and Python values there are baked in); pass what changes in as arguments.
     """
 
     def __init__(self, world, fn: Callable) -> None:
@@ -109,5 +125,6 @@ class WorldKernel:
         if not world.physics_compiled:
             return self._fn(*args, **kwargs)
         if self._compiled is None or self._mode != world.compile_mode:
-            self._compiled, self._mode = compile_for_world(self._fn, world.compile_mode), world.compile_mode
+            self._compiled = compile_for_world(self._fn, world.compile_mode, arguments_only=True)
+            self._mode = world.compile_mode
         return self._compiled(*args, **kwargs)

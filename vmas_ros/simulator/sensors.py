@@ -10,7 +10,25 @@ from torch import Tensor
 
 from vmas_ros.simulator.utils import Color
 
-__all__ = ["Sensor", "Lidar"]
+__all__ = ["Sensor", "Lidar", "CollidesWith"]
+
+
+class CollidesWith:
+    """An ``entity_filter`` for lidars: the entities that collide with ``entity`` both ways.
+
+    Its answers depend only on the entities' collision properties, which the
+    world's tables also depend on, so it says ``layout_static``: the world
+    works out its targets once per tables instead of calling it for every
+    entity on every cast (a 4-agent sim_node: ~60 filter calls per step).
+    """
+
+    layout_static = True
+
+    def __init__(self, entity) -> None:
+        self.entity = entity
+
+    def __call__(self, other) -> bool:
+        return other.collides(self.entity) and self.entity.collides(other)
 
 
 class Sensor(abc.ABC):

@@ -50,7 +50,7 @@ def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.St
     if isinstance(actions, tuple):
         actions = assemble_actions(state.q, tables, *actions)
     new = physics.step_planar(state, tables, params, actions, fixed_rotation, actions_writable=True)
-    return new, tuple(kernel(new.q, new.v) for kernel in kernels)
+    return new, tuple(None if kernel is None else kernel(new.q, new.v) for kernel in kernels)
 
 
 def _planar_over_zeros(given: List[List[Optional[Tensor]]], n: int, batch: int, device) -> physics.PlanarState:
@@ -144,6 +144,8 @@ class World(RayQueries, ActionInputs, StateAccess):
         self._kernel_outputs: Tuple[int, list] = (-1, [])  # (store generation, one output per kernel)
         #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
         self._ray_kernels = _EAGER_RAY_KERNELS
+        #: (entity id, filter id) -> (tables, filter, targets) of layout-static lidar filters (see ray_targets)
+        self._static_ray_targets: Dict[tuple, tuple] = {}
 
     #: How contacts near the broad-phase radius are decided: "batch" (VMAS 1.5
     #: behaviour, bit-for-bit parity) or "env" (each env independent of the others).
@@ -182,7 +184,7 @@ class World(RayQueries, ActionInputs, StateAccess):
         self._physics_step = LayoutCompiled(_advance, mode, key=_step_layout,
                                             checked=("state.", "actions", "fixed_rotation"))
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
-        self._ray_kernels = {kind: compile_for_world(fn, mode) for kind, fn in _EAGER_RAY_KERNELS.items()}
+        self._ray_kernels = {kind: compile_for_world(fn, mode, arguments_only=True) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:

@@ -14,19 +14,31 @@ from vmas_ros.simulator.entities import Entity
 
 
 class RayQueries:
-    """Ray casting against the world's collidable entities; ``World`` provides ``entities``,
-    ``_device`` and ``_ray_kernels``."""
+    """Ray casting against the world's collidable entities; ``World`` provides ``entities``, ``tables``,
+    ``_device``, ``_ray_kernels`` and ``_static_ray_targets``."""
 
     def cast_ray(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:
         """Distance [B] along one ray per env from ``entity`` to the nearest filtered entity."""
         return self.cast_rays(entity, angles.unsqueeze(-1), max_range, entity_filter).squeeze(-1)
 
     def ray_targets(self, entity: Entity, entity_filter: Callable[[Entity], bool]) -> List[Entity]:
-        """The entities rays from ``entity`` can hit (``entity_filter`` true, not itself); all must collide with it."""
+        """The entities rays from ``entity`` can hit (``entity_filter`` true, not itself); all must collide with it.
+
+        A filter that says ``layout_static`` (its answers follow the entities'
+        table properties only, e.g. ``sensors.CollidesWith``) is asked once per
+        world tables; any other filter on every call, since it may read the state.
+        """
+        static = getattr(entity_filter, "layout_static", False)
+        if static:
+            cached = self._static_ray_targets.get((id(entity), id(entity_filter)))
+            if cached is not None and cached[0] is self.tables and cached[1] is entity_filter:
+                return cached[2]
         targets = [e for e in self.entities if e is not entity and entity_filter(e)]
         for e in targets:
             if not (e.collides(entity) and entity.collides(e)):
                 raise ValueError(f"rays are cast only among collidable entities: {entity.name!r} and {e.name!r} do not collide")
+        if static:
+            self._static_ray_targets[(id(entity), id(entity_filter))] = (self.tables, entity_filter, targets)
         return targets
 
     def cast_rays(self, entity: Entity, angles: Tensor, max_range: float, entity_filter: Callable[[Entity], bool] = lambda _: False) -> Tensor:

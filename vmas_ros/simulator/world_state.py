@@ -10,7 +10,7 @@ state changed they are rebuilt from the entities, once per change.
 """
 from __future__ import annotations
 
-from typing import Callable, List, Tuple
+from typing import Callable, List, Optional, Tuple
 
 import torch
 from torch import Tensor
@@ -85,6 +85,13 @@ class StateAccess:
         """
         self._state_kernels.append(kernel)
         return len(self._state_kernels) - 1
+
+    def replace_state_kernel(self, handle: int, kernel: Optional[Callable[[Tensor, Tensor], object]]) -> None:
+        """Put ``kernel`` in place of kernel ``handle`` (None: the slot computes nothing, its output is None),
+        for users whose kernel depends on a layout that changed (a compiled step compiles a new copy)."""
+        if not 0 <= handle < len(self._state_kernels):
+            raise ValueError(f"no state kernel {handle!r}: handles are 0..{len(self._state_kernels) - 1}")
+        self._state_kernels[handle] = kernel
 
     def take_state_kernel_output(self, handle: int):
         """The output of kernel ``handle`` on the current state, handed out once; None when the state
