@@ -69,7 +69,7 @@ def test_compiled_lidar_equals_eager(device):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("num_envs", [1, 64])
+@pytest.mark.parametrize("num_envs", [1, 64, 1000])  # 1000: above SMALL_BATCH_ELEMENTS, the held-block path
 def test_the_compiled_step_is_one_graph_from_the_first_step(device, num_envs):
     """Compiling before any eager step must still give one graph: a cache filled inside the traced
     step (tables' helpers) breaks it into several, each with its own call overhead."""
@@ -84,6 +84,7 @@ def test_the_compiled_step_is_one_graph_from_the_first_step(device, num_envs):
     # a state kernel
     assert counters["stats"]["unique_graphs"] - graphs == 1
     assert sum(counters["graph_break"].values()) == breaks
+    assert all(copy.one_graph for copy in env.world._physics_step._copies.values())
 
 
 @pytest.mark.slow
@@ -165,7 +166,8 @@ def test_compiled_step_checks_only_its_inputs_and_recompiles_for_a_new_layout(de
     torch.testing.assert_close(_rollout(compiled, actions), _rollout(eager, actions), atol=1e-5, rtol=1e-4)
     steps = compiled.world._physics_step
     (copy,) = steps._copies.values()
-    code = (getattr(copy, "_torchdynamo_orig_callable", None) or copy.__wrapped__).__code__
+    assert copy.one_graph, "guards are cut only for one-graph copies"
+    code = (getattr(copy._compiled, "_torchdynamo_orig_callable", None) or copy._compiled.__wrapped__).__code__
     (entry,) = _debug_get_cache_entry_list(code)
     guards = str(entry.guard_manager)
     assert "tables" not in guards and "kernels" not in guards, "no guard on what the layout key covers"
@@ -196,8 +198,36 @@ def test_world_kernels_check_only_their_arguments(device):
     torch.testing.assert_close(kernel(q), q[0] + 1)
     bias.fill_(2.0)  # read afresh: the constant's current value
     torch.testing.assert_close(kernel(q), q[0] + 2)
-    code = (getattr(kernel._compiled, "_torchdynamo_orig_callable", None) or kernel._compiled.__wrapped__).__code__
+    compiled = kernel._compiled._compiled
+    code = (getattr(compiled, "_torchdynamo_orig_callable", None) or compiled.__wrapped__).__code__
     guards = str(_debug_get_cache_entry_list(code)[0].guard_manager)
     assert "keywords" not in guards and "args'][0]" in guards, guards
     with pytest.raises(ValueError, match="no state kernel 5"):
         env.world.replace_state_kernel(5, None)
+
+
+def _doubled_after_a_break(y):
+    """Shared code with a graph break: a resumed frame whose guards name ``y``."""
+    torch._dynamo.graph_break()
+    return y * 2
+
+
+def _outer(x):
+    return _doubled_after_a_break(x + 1)
+
+
+@pytest.mark.slow
+def test_a_function_with_a_graph_break_keeps_all_its_guards(device):
+    """Guards are cut only where a function compiles to one graph: after a graph break the resumed frames
+    are shared code whose guards name their own locals (``y`` here, not the checked ``x``), so a function
+    that breaks is compiled with all of its guards and follows new shapes (cutting them ran the code
+    compiled for 3 envs on 5: a size assertion inside the compiled code)."""
+    from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
+
+    layout = LayoutCompiled(_outer, None, key=lambda x: "one layout", checked=("x",))
+    kernel = compile_for_world(_outer, None, arguments_only=True)
+    for n in (3, 5, 3):
+        x = torch.arange(2.0 * n, device=device).view(2, n)
+        torch.testing.assert_close(layout("owner", x), _outer(x))
+        torch.testing.assert_close(kernel(x), _outer(x))
+    assert kernel.one_graph is False and all(c.one_graph is False for c in layout._copies.values())

@@ -43,8 +43,9 @@ def compile_for_world(fn: Callable, mode: Optional[str], arguments_only: bool = 
     ``arguments_only``: check only what is passed in on each call (see :func:`_direct_arguments`), for
     pure functions whose other inputs (a partial's constants, a bound method's attributes) never change.
     """
-    options = {"guard_filter_fn": _direct_arguments} if arguments_only else None
-    return torch.compile(own_copy(fn), dynamic=False, mode=mode, options=options)
+    if not arguments_only:
+        return torch.compile(own_copy(fn), dynamic=False, mode=mode)
+    return _OneGraph(fn, mode, _direct_arguments)
 
 
 #: guards that cover process-wide state (grad mode, default device, ...): cheap, and never implied by a layout
@@ -70,6 +71,38 @@ def _guards_on(arguments: Sequence[str]) -> Callable:
                 for entry in entries]
 
     return keep
+
+
+class _OneGraph:
+    """``fn`` compiled as one graph with cut guards, or, if it cannot be one graph, compiled as usual.
+
+    Guards are cut (``guard_filter``) only where the whole function is one
+    frame (``fullgraph=True``): after a graph break the resumed frames are
+    other, shared code objects whose guards name their own locals, and
+    cutting those would let code compiled for one world run on another's
+    shapes. A function that breaks falls back to ``torch.compile`` with all of
+    its guards (correct, slower; the compiled-path tests require one graph).
+    """
+
+    def __init__(self, fn: Callable, mode: Optional[str], guard_filter: Callable) -> None:
+        self._fn, self._mode = fn, mode
+        self._compiled = torch.compile(own_copy(fn), dynamic=False, mode=mode, fullgraph=True,
+                                       options={"guard_filter_fn": guard_filter})
+        self.one_graph: Optional[bool] = None  # known after the first call
+
+    def __call__(self, *args, **kwargs):
+        if self.one_graph is False:
+            return self._compiled(*args, **kwargs)
+        try:
+            result = self._compiled(*args, **kwargs)
+        except torch._dynamo.exc.Unsupported:
+            if self.one_graph:  # it compiled as one graph before: this is not a graph break
+                raise
+            self.one_graph = False
+            self._compiled = torch.compile(own_copy(self._fn), dynamic=False, mode=self._mode)
+            return self._compiled(*args, **kwargs)
+        self.one_graph = True
+        return result
 
 
 class LayoutCompiled:
@@ -100,8 +133,7 @@ class LayoutCompiled:
         key = self._key(*args)
         compiled = self._copies.get(key)
         if compiled is None:
-            compiled = self._copies[key] = torch.compile(own_copy(self._fn), dynamic=False, mode=self._mode,
-                                                         options={"guard_filter_fn": self._filter})
+            compiled = self._copies[key] = _OneGraph(self._fn, self._mode, self._filter)
         return compiled(*args)
 
 

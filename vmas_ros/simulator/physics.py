@@ -211,7 +211,8 @@ def step_planar(
             # held entities (landmarks) are one block at an end: integrate only the free block and
             # put the held rows back with one copy, instead of blending every row with 0/1 masks
             lo, hi = span
-            if _differentiable(q, v, force):
+            # (compiled: the same cat, which the compiler fuses; out= into row slices would break its graph)
+            if _differentiable(q, v, force) or torch.compiler.is_compiling():
                 free_q, free_v = _integrate(q[:, lo:hi], v[:, lo:hi], force[:, lo:hi], c["free_block"], substep == 0)
                 q = torch.cat([q[:, :lo], free_q] if lo else [free_q, q[:, hi:]], dim=1)
                 v = torch.cat([v[:, :lo], free_v] if lo else [free_v, v[:, hi:]], dim=1)
