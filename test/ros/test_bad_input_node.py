@@ -135,6 +135,23 @@ class TestCommands:
             for c in odom.values():
                 c.destroy()
 
+    def test_subscribers_asking_more_than_the_node_offers_are_named(self, ros, sim):
+        """The state topics have no per-round QoS event handlers (they cost every executor round); the
+        node's QoS audit names a subscriber that can never receive instead (here: transient-local on a
+        volatile topic), once."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+
+        wants_history = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        subscription = ros.node.create_subscription(Odometry, "/agent_1/odom", lambda _msg: None, wants_history)
+        try:
+            warning = (f"the subscriber /{ros.node.get_name()} of /agent_1/odom receives nothing: it requests "
+                       "transient-local durability and the topic is volatile")
+            ros.spin_until(lambda: warning in sim.output(), 10, "the QoS warning")
+            ros.spin_for(4.5)  # two more audits: still one warning
+            assert sim.output().count(warning) == 1
+        finally:
+            ros.node.destroy_subscription(subscription)
+
     def test_publishers_of_unknown_agents_and_wrong_types_are_named(self, ros, sim):
         publishers = [
             ros.node.create_publisher(Twist, "/agent_9/cmd_vel", 10),

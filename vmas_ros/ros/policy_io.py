@@ -29,6 +29,7 @@ import torch
 from std_msgs.msg import Float32, Float32MultiArray, MultiArrayDimension
 
 from vmas_ros.ros.lifecycle import SimulationFault
+from vmas_ros.ros.topic_audit import quiet_publisher_events, quiet_subscription_events
 
 #: seconds between two warnings about dropped actions (a broken publisher floods)
 WARN_PERIOD = 2.0
@@ -67,15 +68,19 @@ class AgentTopics:
         self.on_action = on_action  # e.g. record the received message
         self.sizes = [env.get_agent_action_size(a) for a in env.agents]
         self.bounds = action_bounds(env)
-        self.obs_pubs = [node.create_publisher(Float32MultiArray, f"{n}/observation", pub_qos) for n in self.names]
-        self.reward_pubs = [node.create_publisher(Float32, f"{n}/reward", pub_qos) for n in self.names]
+        quiet = quiet_publisher_events  # no per-round event handlers (see topic_audit.quiet_publisher_events)
+        self.obs_pubs = [node.create_publisher(Float32MultiArray, f"{n}/observation", pub_qos, event_callbacks=quiet())
+                         for n in self.names]
+        self.reward_pubs = [node.create_publisher(Float32, f"{n}/reward", pub_qos, event_callbacks=quiet())
+                            for n in self.names]
         self.obs_msgs: List[Float32MultiArray] = []
         self.obs_views: List[np.ndarray] = []  # numpy views on each message's array.array (written in place)
         self.reward_msgs = [Float32() for _ in self.names]
         self.actions: Dict[int, Tuple[np.ndarray, float]] = {}  # agent index -> (action, monotonic arrival)
         self._warned: Dict[int, float] = {}  # agent index -> last warning (throttled per agent)
         self.action_subs = [
-            node.create_subscription(Float32MultiArray, f"{name}/action", lambda msg, i=i: self._on_action(i, msg), sub_qos)
+            node.create_subscription(Float32MultiArray, f"{name}/action", lambda msg, i=i: self._on_action(i, msg), sub_qos,
+                                     event_callbacks=quiet_subscription_events())
             for i, name in enumerate(self.names)
         ]
 

@@ -278,7 +278,10 @@ class StatePublisher:
 
         classes = {type_name(c): c for c in (PoseArray, PoseStamped, Odometry, Clock, LaserScan, MarkerArray)}
         self.messages = messages
-        self.publishers = [node.create_publisher(classes[kind], topic, qos)
+        from vmas_ros.ros.topic_audit import quiet_publisher_events
+
+        # no default event handlers: they cost every executor round (QosAudit warns instead)
+        self.publishers = [node.create_publisher(classes[kind], topic, qos, event_callbacks=quiet_publisher_events())
                            for topic, kind in zip(messages.topics, messages.types)]
 
     def publish(self, record: Optional[Callable[[str, str, bytes], None]] = None) -> None:

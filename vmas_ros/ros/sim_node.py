@@ -41,7 +41,7 @@ from vmas_ros.ros.lifecycle import ConfigError, SimulationFault
 from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, run_checked, unknown_parameters, validate
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
 from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
-from vmas_ros.ros.topic_audit import TopicAudit
+from vmas_ros.ros.topic_audit import QosAudit, TopicAudit, quiet_subscription_events
 from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
 
@@ -175,7 +175,8 @@ class SimNode(Node):
         frame = self.params.frame_id
         for i, name in enumerate(self.agent_names):
             cmd_type = TwistStamped if self.params.use_stamped_cmd_vel else Twist
-            self.create_subscription(cmd_type, f"{name}/cmd_vel", lambda msg, i=i: self._on_cmd_vel(i, msg), ACCEPT_ANY)
+            self.create_subscription(cmd_type, f"{name}/cmd_vel", lambda msg, i=i: self._on_cmd_vel(i, msg), ACCEPT_ANY,
+                                     event_callbacks=quiet_subscription_events())
         self.markers = MarkerArray()
         for k, entity in enumerate(world.entities):
             marker = Marker()
@@ -198,6 +199,8 @@ class SimNode(Node):
                                         on_action=self._record_received)
         self.learned = self._load_policy()
         self.topic_audit = TopicAudit.of_sim_node(self, self.agent_names, self.params.use_stamped_cmd_vel)
+        self.qos_audit = QosAudit(self, [*self.state_pub.publishers, *self.agent_topics.obs_pubs,
+                                         *self.agent_topics.reward_pubs])
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)

@@ -91,6 +91,75 @@ class TopicAudit:
             self.node.get_logger().warning(f"ignoring a publisher of {kind} on {topic}: {reason}; {self.consequence}")
 
 
+def quiet_publisher_events():
+    """Event callbacks for a publisher without rclpy's default QoS/type event handlers.
+
+    Every handler is a waitable that each executor round walks in Python: the
+    ~30 of sim_node's per-step topics made one round of the unpaced node cost
+    340 us instead of 110 (with several rounds per millisecond of stepping).
+    What they would warn about is audited instead, every few seconds
+    (:meth:`QosAudit.check` for the published topics, :class:`TopicAudit` for
+    the subscribed ones, whose best-effort QoS accepts any publisher).
+    """
+    from rclpy.event_handler import PublisherEventCallbacks
+
+    return PublisherEventCallbacks(use_default_callbacks=False)
+
+
+def quiet_subscription_events():
+    """The same for a subscription (see :func:`quiet_publisher_events`)."""
+    from rclpy.event_handler import SubscriptionEventCallbacks
+
+    return SubscriptionEventCallbacks(use_default_callbacks=False)
+
+
+class QosAudit:
+    """Warns once about subscribers of the node's topics that ask for more than the node offers.
+
+    A subscriber requesting reliable delivery from a best-effort publisher, or
+    transient-local durability from a volatile one, is matched by DDS but gets
+    nothing; rclpy's default publisher event handlers would say so, but cost
+    every executor round (see :func:`quiet_publisher_events`), so the graph
+    is read every ``period`` seconds instead.
+    """
+
+    def __init__(self, node, publishers: Iterable, period: float = AUDIT_PERIOD_S) -> None:
+        self.node = node
+        self.publishers = list(publishers)
+        self.reported: Set[Tuple[str, str, str]] = set()  # (topic, subscriber node, reason)
+        self.timer = node.create_timer(period, self.check)
+
+    def problems(self) -> List[Tuple[str, str, str]]:
+        """(topic, subscriber node, reason) of every subscriber on an audited topic that receives nothing."""
+        from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+        found = []
+        for publisher in self.publishers:
+            offered = publisher.qos_profile
+            for info in self.node.get_subscriptions_info_by_topic(publisher.topic_name):
+                wanted = info.qos_profile
+                reason = None
+                if wanted.reliability == ReliabilityPolicy.RELIABLE and offered.reliability == ReliabilityPolicy.BEST_EFFORT:
+                    reason = "it requests reliable delivery and the topic is best effort"
+                elif (wanted.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                      and offered.durability != DurabilityPolicy.TRANSIENT_LOCAL):
+                    reason = "it requests transient-local durability and the topic is volatile"
+                if reason is not None:
+                    found.append((publisher.topic_name, f"{info.node_namespace.rstrip('/')}/{info.node_name}", reason))
+        return found
+
+    def check(self) -> None:
+        try:
+            problems = self.problems()
+        except Exception:  # the graph may be gone during shutdown: nothing to report then
+            return
+        for topic, subscriber, reason in problems:
+            if (topic, subscriber, reason) in self.reported:
+                continue
+            self.reported.add((topic, subscriber, reason))
+            self.node.get_logger().warning(f"the subscriber {subscriber} of {topic} receives nothing: {reason}")
+
+
 def type_name_of(message_class: type) -> str:
     """``pkg/msg/Name`` of a message class, as the ROS graph reports types (e.g. std_msgs/msg/String)."""
     return f"{message_class.__module__.split('.')[0]}/msg/{message_class.__name__}"
