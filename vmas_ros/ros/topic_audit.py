@@ -1,4 +1,4 @@
-"""Warnings about commands that can never arrive: unknown agents and wrong message types.
+"""Warnings about messages that can never arrive: unknown agents, wrong message types, QoS asked but not offered.
 
 ROS drops such messages silently. A publisher on ``/agent_9/cmd_vel`` when the
 scenario has three agents, or a ``TwistStamped`` publisher on a topic the node
@@ -10,17 +10,48 @@ It only reads the graph (no subscriptions are made), so it costs one graph
 query per period and never touches the messages themselves. sim_node audits
 its command topics (``of_sim_node``: unknown agents and wrong types);
 policy_node audits the inputs its adapter subscribes (``of_inputs``: wrong
-types only, since an adapter may read any topic).
+types only, since an adapter may read any topic). ``QosAudit`` does the same
+for the subscribers of sim_node's own topics.
 """
 from __future__ import annotations
 
+import abc
 from typing import Dict, Iterable, List, Set, Tuple
 
 #: seconds between two looks at the graph
 AUDIT_PERIOD_S = 2.0
 
 
-class TopicAudit:
+class _GraphAudit(abc.ABC):
+    """Reads the ROS graph every ``period`` seconds and warns once about each problem found."""
+
+    def __init__(self, node, period: float) -> None:
+        self.node = node
+        self.reported: Set[tuple] = set()  # problems already warned about
+        self.timer = node.create_timer(period, self.check)
+
+    @abc.abstractmethod
+    def problems(self) -> List[tuple]:
+        """Every problem in the graph now, each a tuple that names it."""
+
+    @abc.abstractmethod
+    def warning(self, problem: tuple) -> str:
+        """The warning for ``problem``."""
+
+    def check(self) -> None:
+        """Warn once per problem (a timer callback)."""
+        try:
+            problems = self.problems()
+        except Exception:  # the graph may be gone during shutdown: nothing to report then
+            return
+        for problem in problems:
+            if problem in self.reported:
+                continue
+            self.reported.add(problem)
+            self.node.get_logger().warning(self.warning(problem))
+
+
+class TopicAudit(_GraphAudit):
     """Looks for publishers on command topics the node does not serve as published.
 
     Args:
@@ -36,15 +67,13 @@ class TopicAudit:
 
     def __init__(self, node, expected: Dict[str, str], suffixes: Iterable[str], agents: Iterable[str],
                  period: float = AUDIT_PERIOD_S, consequence: str = "its messages never reach an agent") -> None:
-        self.node = node
+        super().__init__(node, period)
         self.expected = dict(expected)
         self.suffixes = tuple(suffixes)
         self.agents = list(agents)
         self.consequence = consequence
         namespace = node.get_namespace().rstrip("/")
         self.prefix = namespace + "/"
-        self.reported: Set[Tuple[str, str]] = set()  # (topic, type) already warned about
-        self.timer = node.create_timer(period, self.check)
 
     @classmethod
     def of_sim_node(cls, node, agent_names: Iterable[str], stamped: bool) -> "TopicAudit":
@@ -78,17 +107,9 @@ class TopicAudit:
                     found.append((topic, kind, f"expected {want}"))
         return found
 
-    def check(self) -> None:
-        """Warn once per (topic, type) about publishers whose messages are ignored."""
-        try:
-            problems = self.problems()
-        except Exception:  # the graph may be gone during shutdown: nothing to report then
-            return
-        for topic, kind, reason in problems:
-            if (topic, kind) in self.reported:
-                continue
-            self.reported.add((topic, kind))
-            self.node.get_logger().warning(f"ignoring a publisher of {kind} on {topic}: {reason}; {self.consequence}")
+    def warning(self, problem: tuple) -> str:
+        topic, kind, reason = problem
+        return f"ignoring a publisher of {kind} on {topic}: {reason}; {self.consequence}"
 
 
 def quiet_publisher_events():
@@ -113,7 +134,7 @@ def quiet_subscription_events():
     return SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
-class QosAudit:
+class QosAudit(_GraphAudit):
     """Warns once about subscribers of the node's topics that ask for more than the node offers.
 
     A subscriber requesting reliable delivery from a best-effort publisher, or
@@ -124,10 +145,8 @@ class QosAudit:
     """
 
     def __init__(self, node, publishers: Iterable, period: float = AUDIT_PERIOD_S) -> None:
-        self.node = node
+        super().__init__(node, period)
         self.publishers = list(publishers)
-        self.reported: Set[Tuple[str, str, str]] = set()  # (topic, subscriber node, reason)
-        self.timer = node.create_timer(period, self.check)
 
     def problems(self) -> List[Tuple[str, str, str]]:
         """(topic, subscriber node, reason) of every subscriber on an audited topic that receives nothing."""
@@ -148,16 +167,9 @@ class QosAudit:
                     found.append((publisher.topic_name, f"{info.node_namespace.rstrip('/')}/{info.node_name}", reason))
         return found
 
-    def check(self) -> None:
-        try:
-            problems = self.problems()
-        except Exception:  # the graph may be gone during shutdown: nothing to report then
-            return
-        for topic, subscriber, reason in problems:
-            if (topic, subscriber, reason) in self.reported:
-                continue
-            self.reported.add((topic, subscriber, reason))
-            self.node.get_logger().warning(f"the subscriber {subscriber} of {topic} receives nothing: {reason}")
+    def warning(self, problem: tuple) -> str:
+        topic, subscriber, reason = problem
+        return f"the subscriber {subscriber} of {topic} receives nothing: {reason}"
 
 
 def type_name_of(message_class: type) -> str:
