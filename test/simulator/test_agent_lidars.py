@@ -105,7 +105,7 @@ def test_a_riding_cast_is_computed_by_the_compiled_step_and_equals_measure(devic
         calls = []
         kernel = cast._plan[1]
         counted = lambda q, kernel=kernel: calls.append(1) or kernel(q)  # noqa: E731
-        cast._plan = (cast._plan[0], counted, cast._plan[2])
+        cast._plan = (cast._plan[0], counted)
         readings = cast.cast(world, sensors)
         assert cast._plan[1] is counted, "same layout: not planned again"
         assert not calls, "right after a compiled step the readings come from the step's own graph"

@@ -29,6 +29,7 @@ from builtin_interfaces.msg import Time
 
 from vmas_ros.ros import convert
 from vmas_ros.ros.cdr import serialize_zeroed
+from vmas_ros.ros.topic_audit import quiet_publisher_events
 
 #: up to this many envs x rays the node's lidars are cast inside the compiled step (CompiledCast ride_along)
 RIDE_ALONG_MAX_ELEMENTS = 4096
@@ -278,8 +279,6 @@ class StatePublisher:
 
         classes = {type_name(c): c for c in (PoseArray, PoseStamped, Odometry, Clock, LaserScan, MarkerArray)}
         self.messages = messages
-        from vmas_ros.ros.topic_audit import quiet_publisher_events
-
         # no default event handlers: they cost every executor round (QosAudit warns instead)
         self.publishers = [node.create_publisher(classes[kind], topic, qos, event_callbacks=quiet_publisher_events())
                            for topic, kind in zip(messages.topics, messages.types)]

@@ -195,7 +195,7 @@ class CompiledCast:
     """
 
     def __init__(self, ride_along: bool = False) -> None:
-        self._plan: Optional[tuple] = None  # (layout it was planned for, WorldKernel or None, state kernel or None)
+        self._plan: Optional[tuple] = None  # (layout it was planned for, WorldKernel or None)
         #: cast inside the compiled step, as one of the world's state kernels (see :meth:`cast`)
         self._ride_along = ride_along
         self._handle: Optional[int] = None
@@ -216,7 +216,7 @@ class CompiledCast:
             constants = _kernel_constants(world, sensors, targets)
             cast = None if constants is None else functools.partial(lidar_kernel, **constants)
             riding = None if cast is None or not self._ride_along else functools.partial(_of_state, cast)
-            self._plan = (layout, None if cast is None else WorldKernel(world, cast), riding)
+            self._plan = (layout, None if cast is None else WorldKernel(world, cast))
             if self._ride_along:
                 if self._handle is None:
                     self._handle = world.add_state_kernel(riding)

@@ -15,7 +15,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator import physics
-from vmas_ros.simulator.layout import split_xy_into
+from vmas_ros.simulator.layout import split_xy_into, stack_into
 from vmas_ros.simulator.tables import WorldTables
 
 
@@ -79,8 +79,8 @@ def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
     if isinstance(forces, (list, tuple)):
         if not torch.compiler.is_compiling() and not physics._differentiable(*forces, *torques):
             # each agent's force and torque stacked straight into its rows (no stacks of the batch)
-            torch.stack(forces, out=rows[:2].permute(1, 2, 0))
-            torch.stack(torques, out=rows[2].unsqueeze(-1))
+            stack_into(forces, rows[:2])
+            stack_into(torques, rows[2:])
             return actions
         forces, torques = torch.stack(forces), torch.stack(torques)
     if q.numel() <= physics.SMALL_BATCH_ELEMENTS or torch.compiler.is_compiling():
