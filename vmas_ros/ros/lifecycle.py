@@ -26,7 +26,7 @@ import traceback
 from typing import Callable, List, Optional
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from vmas_ros.ros import startup
@@ -55,9 +55,13 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
     node = None
     code = 0
     try:
+        # the executor exists before the node: the node publishes its first state while it is built, so
+        # a signal prompted by that message must not land inside the executor's constructor (rclpy then
+        # prints a traceback from the half-built executor's __del__)
+        executor = SingleThreadedExecutor()
         startup.hand_over()  # a signal from here on stops the node (KeyboardInterrupt), see startup.py
         node = make_node()
-        rclpy.spin(node)
+        rclpy.spin(node, executor=executor)
     except ConfigError as error:
         print(f"{name}: refused parameters: {error}", file=sys.stderr)
         code = EXIT_CONFIG
