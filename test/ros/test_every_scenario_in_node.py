@@ -59,8 +59,8 @@ def _with_context(init, context):
 
 @pytest.mark.slow
 def test_compiled_node_publishes_what_the_eager_node_publishes(rclpy_context, monkeypatch):
-    """compile_physics: true steps through torch.compile (physics and the node's lidar casts); the
-    published poses and scans equal the eager node's to float rounding."""
+    """compile_physics: true steps through torch.compile (physics, the node's lidar casts and the published
+    env's snapshot); the published poses and scans equal the eager node's to float rounding."""
     monkeypatch.setattr(rclpy.node.Node, "__init__", _with_context(rclpy.node.Node.__init__, rclpy_context))
     nodes = [SimNode(scenario="simple_spread", scenario_kwargs='{"n_agents": 4}', control="heuristic", lidar_rays=12,
                      compile_physics=compiled) for compiled in (False, True)]
@@ -69,6 +69,8 @@ def test_compiled_node_publishes_what_the_eager_node_publishes(rclpy_context, mo
         for _ in range(3):
             for node in nodes:
                 node.step_once()
+        # the compiled node's snapshot comes from its step (ride_along.py), the eager one's is gathered after
+        assert nodes[0].ride_along is None and nodes[1].ride_along is not None and nodes[1].ride_along.active
         eager, compiled = (node.state_messages for node in nodes)
         for topic in eager.topics:
             if topic.endswith("/pose"):

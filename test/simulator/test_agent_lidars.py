@@ -144,3 +144,32 @@ def test_layout_static_filters_are_asked_once_per_tables(device):
     for _ in range(2):
         world.ray_targets(a, lambda e: plain.append(e.name) or e.collides(a))
     assert len(plain) == 2 * (len(world.entities) - 1), "a plain filter may read the state: asked every time"
+
+
+@pytest.mark.slow
+def test_a_compiled_cast_plans_again_when_the_tables_change(device):
+    """CompiledCast keeps its plan while the world keeps its tables object (layout-static filters): one
+    identity test per cast. A collision property change (new tables) plans again: the agent that stopped
+    colliding is no longer seen."""
+    from vmas_ros.simulator.sensors import CollidesWith, Lidar
+
+    env = make_env("simple_spread", num_envs=1, device=device, seed=0, n_agents=3)
+    world = env.world
+    for agent in world.agents:
+        agent.add_sensor(Lidar(world, n_rays=24, max_range=2.0, entity_filter=CollidesWith(agent)))
+    world.compile_physics()
+    a, b, c = world.agents
+    b.set_pos(a.state.pos + torch.tensor([0.4, 0.0], device=device), batch_index=None)
+    c.set_pos(a.state.pos + torch.tensor([0.0, 5.0], device=device), batch_index=None)
+    sensors = [agent.sensors[0] for agent in world.agents]
+    cast = lidar_batch.CompiledCast()
+    first = cast.cast(world, sensors)
+    plan = cast._plan
+    assert cast.cast(world, sensors) is not None and cast._plan is plan, "same tables: the same plan"
+    assert (first[0] < 1.0).any(), "a sees b"
+    b.collide = False  # new tables: b is no target any more
+    readings = cast.cast(world, sensors)
+    assert cast._plan is not plan
+    assert (readings[0] == 2.0).all(), "a sees nothing now"
+    for sensor, reading in zip(sensors, readings):
+        torch.testing.assert_close(reading, sensor.measure(), rtol=1e-5, atol=1e-5)

@@ -182,6 +182,10 @@ def test_compiled_step_checks_only_its_inputs_and_recompiles_for_a_new_layout(de
     torch.testing.assert_close(moved[1], moved[0], atol=1e-5, rtol=1e-4)
 
 
+def _biased(q: torch.Tensor, bias: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
+    return q[0] * scale + bias
+
+
 @pytest.mark.slow
 def test_world_kernels_check_only_their_arguments(device):
     """A WorldKernel (here a lidar cast: a partial with a dozen bound tensors) is guarded on its arguments
@@ -193,7 +197,7 @@ def test_world_kernels_check_only_their_arguments(device):
 
     env = vmas_ros.make_env("simple_spread", num_envs=3, device=device, seed=0, compile_physics=True)
     bias = torch.ones(3, device=device)
-    kernel = WorldKernel(env.world, functools.partial(lambda q, bias: q[0] + bias, bias=bias))
+    kernel = WorldKernel(env.world, functools.partial(_biased, bias=bias))
     q = env.world.planar_state()[0]
     torch.testing.assert_close(kernel(q), q[0] + 1)
     bias.fill_(2.0)  # read afresh: the constant's current value
@@ -201,7 +205,13 @@ def test_world_kernels_check_only_their_arguments(device):
     compiled = kernel._compiled._compiled
     code = (getattr(compiled, "_torchdynamo_orig_callable", None) or compiled.__wrapped__).__code__
     guards = str(_debug_get_cache_entry_list(code)[0].guard_manager)
-    assert "keywords" not in guards and "args'][0]" in guards, guards
+    assert "source=L['_bound" not in guards and "args'][0]" in guards, guards
+    # each partial compiles into code of its own: another kernel of the same function with other constants
+    # computes with its own, Python values included (torch.compile runs every partial through one shared
+    # wrapper function: with guards cut to the arguments, this kernel ran the first one's code, scale 1)
+    other = WorldKernel(env.world, functools.partial(_biased, bias=torch.full((3,), 5.0, device=device), scale=3.0))
+    torch.testing.assert_close(other(q), q[0] * 3 + 5)
+    torch.testing.assert_close(kernel(q), q[0] + 2)
     with pytest.raises(ValueError, match="no state kernel 5"):
         env.world.replace_state_kernel(5, None)
 

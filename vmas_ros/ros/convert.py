@@ -53,9 +53,13 @@ class Snapshot:
     #: everything above in one host array: the state's 6 N values, then every scan (see all_finite)
     host: Optional[np.ndarray] = None
     n_state: int = 0
+    #: the all_finite answer when whoever gathered the snapshot worked it out already (ride_along.py)
+    finite: Optional[bool] = None
 
     def all_finite(self) -> bool:
         """No NaN or inf in the state and no NaN in a scan (an unhit ray may read inf): two passes in all."""
+        if self.finite is not None:
+            return self.finite
         if self.host is None:
             return bool(np.isfinite(self.pos).all() and np.isfinite(self.vel).all() and np.isfinite(self.rot).all()
                         and np.isfinite(self.ang_vel).all()
@@ -78,15 +82,25 @@ class Snapshot:
             state = torch.cat([q[:, :, env_index], v[:, :, env_index]])  # [6, N]: x, y, angle, vx, vy, wz
             readings = [m[env_index].reshape(-1) for i in measurements for m in measurements[i]]
             host = torch.cat([state.reshape(-1)] + [r.to(state.dtype) for r in readings]).cpu().numpy()
-        state = host[: state.numel()].reshape(6, -1)
-        scans, offset = {}, state.size
-        for i, tensors in measurements.items():
+        return Snapshot.of_host(host, {i: [m.shape[-1] for m in tensors] for i, tensors in measurements.items()})
+
+    @staticmethod
+    def of_host(host: np.ndarray, rays: Dict[int, List[int]], verdict: bool = False) -> "Snapshot":
+        """The snapshot laid out in ``host``: the ``[6, N]`` state rows (x, y, angle, vx, vy, wz), then the
+        scans, ``rays[agent]`` values per lidar in that order (views into ``host``, no copies); with
+        ``verdict``, a last value that is non-zero when :meth:`all_finite` holds."""
+        finite = None
+        if verdict:
+            finite, host = bool(host[-1]), host[:-1]
+        n_state = host.size - sum(n for counts in rays.values() for n in counts)
+        state = host[:n_state].reshape(6, -1)
+        scans, offset = {}, n_state
+        for i, counts in rays.items():
             scans[i] = []
-            for m in tensors:
-                n = m.shape[-1]
+            for n in counts:
                 scans[i].append(host[offset: offset + n])
                 offset += n
-        return Snapshot(state[0:2].T, state[3:5].T, state[2], state[5], scans, host, state.size)
+        return Snapshot(state[0:2].T, state[3:5].T, state[2], state[5], scans, host, n_state, finite)
 
 
 def set_pose(pose, x: float, y: float, yaw: float) -> None:

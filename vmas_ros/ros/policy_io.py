@@ -33,6 +33,8 @@ from vmas_ros.ros.topic_audit import quiet_publisher_events, quiet_subscription_
 
 #: seconds between two warnings about dropped actions (a broken publisher floods)
 WARN_PERIOD = 2.0
+#: seconds between checks whether the observation and reward topics have subscribers (see AgentTopics._listened)
+LISTENERS_RECHECK_S = 0.01
 
 
 def flat_observation(obs) -> torch.Tensor:
@@ -78,6 +80,7 @@ class AgentTopics:
         self.reward_msgs = [Float32() for _ in self.names]
         self.actions: Dict[int, Tuple[np.ndarray, float]] = {}  # agent index -> (action, monotonic arrival)
         self._warned: Dict[int, float] = {}  # agent index -> last warning (throttled per agent)
+        self._listeners_checked, self._any_listener = float("-inf"), False  # see _listened
         self.action_subs = [
             node.create_subscription(Float32MultiArray, f"{name}/action", lambda msg, i=i: self._on_action(i, msg), sub_qos,
                                      event_callbacks=quiet_subscription_events())
@@ -102,7 +105,7 @@ class AgentTopics:
         Skipped while nobody subscribes (most runs have no learner attached),
         unless ``always`` (the node records every topic to a bag).
         """
-        if not always and not any(p.get_subscription_count() for p in (*self.obs_pubs, *self.reward_pubs)):
+        if not always and not self._listened():
             return
         rows = [flat_observation(o)[env_index] for o in obs]
         sizes = [int(r.numel()) for r in rows]
@@ -122,6 +125,15 @@ class AgentTopics:
             for i, msg in enumerate(self.reward_msgs):
                 msg.data = float(host[offset + i])
                 self.send(self.reward_pubs[i], msg)
+
+    def _listened(self) -> bool:
+        """Whether anyone subscribes to an observation or reward topic, asked at most every
+        ``LISTENERS_RECHECK_S`` (8 counts each step cost more than the rest of this publishing)."""
+        now = time.monotonic()
+        if now - self._listeners_checked >= LISTENERS_RECHECK_S:
+            self._listeners_checked = now
+            self._any_listener = any(p.get_subscription_count() for p in (*self.obs_pubs, *self.reward_pubs))
+        return self._any_listener
 
     def _nan_names(self, host: np.ndarray, sizes: List[int]) -> str:
         """Which of the gathered vectors (observations, then rewards) hold NaN."""

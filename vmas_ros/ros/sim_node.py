@@ -28,7 +28,6 @@ import sys  # noqa: E402 - after the guard on purpose
 import time
 from typing import Dict, List, Optional
 
-import numpy as np
 import torch
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
@@ -37,10 +36,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 import vmas_ros
 from vmas_ros.ros import convert
 from vmas_ros.ros.command import CommandGate, command_to_action
-from vmas_ros.ros.lifecycle import ConfigError, SimulationFault
+from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, run_checked, unknown_parameters, validate
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
 from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
+from vmas_ros.ros.ride_along import RideAlongSnapshot
+from vmas_ros.ros.stepping import StepLoop
 from vmas_ros.ros.topic_audit import QosAudit, TopicAudit, quiet_subscription_events
 from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
@@ -58,8 +59,6 @@ except ImportError:  # pragma: no cover - depends on the installation
     TFMessage = None
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-#: unpaced (real_time_factor 0, rate_hz 0): wall seconds of steps per timer callback
-UNPACED_BATCH_S = 0.002
 #: a best-effort subscriber accepts reliable and best-effort publishers alike
 ACCEPT_ANY = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 
@@ -74,7 +73,7 @@ def _stamp(nanoseconds: int) -> Time:
     return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 
-class SimNode(Node):
+class SimNode(StepLoop, Node):
     """Steps a vectorized environment and publishes env ``env_index`` as ROS messages."""
 
     def __init__(self, **overrides) -> None:
@@ -95,6 +94,7 @@ class SimNode(Node):
         self._commands: Dict[int, tuple] = {}  # agent index -> (vx, vy, wz, wall time)
         self._command_gate = CommandGate(self.get_logger(), self.agent_names)  # NaN/inf/huge: dropped, named
         self.rewards = None
+        self._zero_actions: Optional[List[torch.Tensor]] = None  # see _actions
         self.foxglove = self._start_foxglove()
         self.recorder = self._start_recorder()
         self._publish()
@@ -190,7 +190,9 @@ class SimNode(Node):
         if self._per_env_colours:
             self.state_messages.set_colour_fields(self._per_env_colours)
         self.state_pub = StatePublisher(self, self.state_messages, RELIABLE)
-        self.lidar_readings = LidarReadings(self.lidars)
+        # compiled, few envs: the step itself gathers env_index's state and scans (ride_along.py)
+        self.ride_along = RideAlongSnapshot(self.lidars) if RideAlongSnapshot.suits(world, self.lidars) else None
+        self.lidar_readings = LidarReadings(self.lidars, ride_along=self.ride_along is None)
         self.phases: Optional[StepPhases] = None  # set by `vmas-ros bench node` to time each part of a step
         self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
         if self.tf_pub is None:
@@ -255,9 +257,11 @@ class SimNode(Node):
         self.get_logger().info(f"recording to {p.record_path} (MCAP, rosbag2-compatible)")
         return recorder
 
-    def _record(self, topic: str, message, qos: str = "reliable") -> None:
+    def _record(self, topic: str, message, qos: str = "reliable", stamp_ns: Optional[int] = None) -> None:
+        """Write ``message`` to the bag, stamped ``stamp_ns`` (default: now in simulation time)."""
         if self.recorder is not None:
-            self.recorder.write(self._topic(topic), _type_name(message), message, self.sim_time_ns, qos=qos)
+            stamp_ns = self.sim_time_ns if stamp_ns is None else stamp_ns
+            self.recorder.write(self._topic(topic), _type_name(message), message, stamp_ns, qos=qos)
 
     def _topic(self, name: str) -> str:
         return name if name.startswith("/") else f"/{name}"
@@ -295,8 +299,11 @@ class SimNode(Node):
             actions = [self.policy.compute_action(o, u_range=a.u_range) for o, a in zip(self.obs, env.agents)]
         elif p.control == "policy":
             actions = policy_actions(self.learned, self.obs, self.agent_topics.bounds)
-        else:
-            actions = [torch.zeros(env.num_envs, env.get_agent_action_size(a), device=env.device) for a in env.agents]
+        else:  # zero: the same zero tensors every step (never written: a command writes into a copy)
+            if self._zero_actions is None:
+                self._zero_actions = [torch.zeros(env.num_envs, env.get_agent_action_size(a), device=env.device)
+                                      for a in env.agents]
+            actions = list(self._zero_actions)
         now = time.monotonic()
         for i, entry in list(self._commands.items()):
             vx, vy, wz, received = entry
@@ -312,82 +319,7 @@ class SimNode(Node):
         return self.agent_topics.apply(actions, p.env_index, p.cmd_vel_timeout, self._commands)
 
     # ---------------------------------------------------------------------- step
-    def _tick(self) -> None:
-        if not self.context.ok():  # shutting down (SIGINT/SIGTERM): publish nothing more
-            return
-        if self.paused:
-            return
-        self.step_once()
-        if self._timer.timer_period_ns == 0:
-            # unpaced: one executor round costs about as much as a whole step, so keep stepping for
-            # up to UNPACED_BATCH_S of wall time; commands and services wait at most that long
-            end = time.perf_counter() + UNPACED_BATCH_S
-            while time.perf_counter() < end and not self.paused and self.context.ok():
-                self.step_once()
-
-    def step_once(self) -> None:
-        """One step: actions, ``env.step``, publish. A failure in any part raises
-        SimulationFault saying which part and whether anything of the step went out,
-        so that the node stops (exit code 3) instead of publishing garbage."""
-        stage = "actions"
-        try:
-            phases = self.phases
-            start = time.perf_counter() if phases is not None else 0.0
-            actions = self._actions()
-            if phases is not None:
-                phases.add("actions", start)
-                start = time.perf_counter()
-            stage = "engine"
-            self.lidar_readings.mark()  # a reading the scenario takes during the step is reused, not cast again
-            self.obs, self.rewards, _, _ = self.env.step(actions)
-            self.steps += 1
-            if phases is not None:
-                phases.add("engine", start)
-            stage = "publish"
-            self._publish()
-        except Exception as error:
-            if not self.context.ok():  # a publish raced the shutdown a signal started: not a fault
-                raise
-            raise self._fault(stage, error) from (error.__cause__ if isinstance(error, SimulationFault) else error)
-
-    def _fault(self, stage: str, error: Exception) -> SimulationFault:
-        """A SimulationFault naming the step, the failing part and what was published."""
-        p = self.params
-        part = {
-            "actions": f"computing the actions (control: {p.control}"
-                       + (f", policy {p.policy_path}" if p.control == "policy" else "") + ")",
-            "engine": f"the scenario {p.scenario!r} (Environment.step)",
-            "publish": f"the state scenario {p.scenario!r} produced" if isinstance(error, SimulationFault)
-                       else "publishing the new state",
-        }[stage]
-        what = str(error) if isinstance(error, SimulationFault) else f"{type(error).__name__}: {error}"
-        what = " ".join(what.split())  # one line: onnxruntime's messages span several
-        step = self.steps if stage == "publish" else self.steps + 1
-        if stage != "publish":
-            kept = "nothing of this step was published or recorded"
-        elif isinstance(error, SimulationFault):  # our own finiteness checks run before the values go out
-            kept = "no non-finite value was published; this step was not recorded"
-        else:
-            kept = "part of this step may have been published; none of it was recorded"
-        return SimulationFault(f"step {step} (t={step * self._dt_ns / 1e9:.3f} s) failed in {part}: {what}; {kept}")
-
-    def _publish(self) -> None:
-        self._step_records = []
-        self._publish_all()
-        if self.recorder is not None:
-            # the whole step goes into the bag at once (signals deferred meanwhile), so a
-            # SIGINT/SIGTERM that interrupts publishing never leaves half a step in the bag
-            with self.recorder.batch():
-                for topic, kind, payload in self._step_records:
-                    if isinstance(payload, bytes):  # the pre-serialised state messages
-                        self.recorder.write_raw(topic, kind, payload, self.sim_time_ns)
-                    else:
-                        self._record(topic, payload)
-                if self._tf_bytes is not None:
-                    from vmas_ros.record import TF_MESSAGE_TYPE
-
-                    self.recorder.write_raw("/tf", TF_MESSAGE_TYPE, self._tf_bytes, self.sim_time_ns)
-
+    # (the step loop and its publishing: stepping.StepLoop)
     def _send(self, publisher, message) -> None:
         publisher.publish(message)
         if self.recorder is not None:
@@ -396,53 +328,12 @@ class SimNode(Node):
     def _record_payload(self, topic: str, kind: str, payload: bytes) -> None:
         self._step_records.append((topic, kind, payload))
 
-    def _publish_all(self) -> None:
-        p, phases = self.params, self.phases
-        world = self.env.world
-        start = time.perf_counter() if phases is not None else 0.0
-        readings = self.lidar_readings.take(world)
-        if phases is not None:
-            phases.add("lidar", start)
-            start = time.perf_counter()
-        snap = convert.Snapshot.take(world, p.env_index, self.lidars, readings)
-        self._check_finite(snap)
-        colours = None
-        if self._per_env_colours:  # e.g. goal colours drawn per env at reset
-            colours = [c for k in self._per_env_colours for c in convert.rgb(world.entities[k].color, p.env_index)]
-        self.state_messages.fill(snap, self.sim_time_ns, colours)
-        if phases is not None:
-            phases.add("convert", start)
-            start = time.perf_counter()
-        self.state_pub.publish(self._record_payload if self.recorder is not None else None)
-        self._publish_tf(snap)
-        self.agent_topics.publish(self.obs, self.rewards, p.env_index, always=self.recorder is not None)
-        if self.foxglove is not None:
-            self.foxglove.publish(snap, world.entities, self.scan_geometry, self.sim_time_ns, env_index=p.env_index)
-            if self.rewards is not None:
-                values = {name: float(r[p.env_index]) for name, r in zip(self.agent_names, self.rewards)}
-                values["total"] = sum(values.values())
-                self.foxglove.log_json("/rewards", values, self.sim_time_ns)
-        if phases is not None:
-            phases.add("publish", start)
-            phases.steps += 1
-
-    def _check_finite(self, snap) -> None:
-        """Refuse (SimulationFault) a NaN/inf pose or velocity, or a NaN scan, before any is published."""
-        if snap.all_finite():
-            return
-        entities = self.env.world.entities
-        bad = [entities[k].name for k in range(len(entities))
-               if not (np.isfinite(snap.pos[k]).all() and np.isfinite(snap.vel[k]).all()
-                       and np.isfinite(snap.rot[k]) and np.isfinite(snap.ang_vel[k]))]
-        bad += [f"{self.agent_names[i]}'s scan" for i, ss in snap.scans.items() if any(np.isnan(s).any() for s in ss)]
-        raise SimulationFault(f"non-finite state in env {self.params.env_index}: {', '.join(bad)}")
-
-    def _publish_tf(self, snap) -> None:
+    def _publish_tf(self, snap, stamp_ns: int) -> None:
         """/tf where tf2_msgs exists; without it, only the bag gets /tf (serialised from its definition)."""
         self._tf_bytes = None
         if self.tf_pub is None and self.recorder is None:
             return
-        stamp, n_landmarks = _stamp(self.sim_time_ns), len(self.env.world.landmarks)
+        stamp, n_landmarks = _stamp(stamp_ns), len(self.env.world.landmarks)
         transforms = []
         for i, name in enumerate(self.agent_names):
             x, y, yaw = snap.pos[n_landmarks + i, 0], snap.pos[n_landmarks + i, 1], snap.rot[n_landmarks + i]

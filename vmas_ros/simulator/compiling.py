@@ -29,12 +29,29 @@ def own_copy(fn: Callable) -> Callable:
     session, a sweep) would silently lose its compiled step.
     """
     if isinstance(fn, functools.partial):
-        return functools.partial(own_copy(fn.func), *fn.args, **fn.keywords)
+        # torch.compile runs a partial (which has no frame) through one wrapper function shared by every
+        # partial in the process: guards cut to the arguments would then let one partial's compiled code
+        # run with another's constants. A function of our own gives each its own code object.
+        return _calling(own_copy(fn.func), fn.args, fn.keywords)
     if isinstance(fn, types.MethodType):
         return types.MethodType(own_copy(fn.__func__), fn.__self__)
     copy = types.FunctionType(fn.__code__.replace(), fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__)
     copy.__kwdefaults__ = fn.__kwdefaults__
     return copy
+
+
+def _calling(func: Callable, bound_args: tuple, bound_keywords: dict) -> Callable:
+    """``func`` with ``bound_args``/``bound_keywords`` bound, as a plain function with a code object of its own.
+
+    Its own parameters are named ``args``/``kwargs``: guards on the call's arguments keep those names
+    (see :func:`_direct_arguments`), the bound constants are reached through the closure (names of
+    their own, :data:`_BOUND`, whose guards the argument filter drops)."""
+    _bound_func, _bound_args, _bound_keywords = func, bound_args, bound_keywords
+
+    def call(*args, **kwargs):
+        return _bound_func(*_bound_args, *args, **_bound_keywords, **kwargs)
+
+    return own_copy(call)
 
 
 def compile_for_world(fn: Callable, mode: Optional[str], arguments_only: bool = False) -> Callable:
@@ -53,12 +70,15 @@ _GLOBAL_GUARDS = frozenset({"GRAD_MODE", "GLOBAL_STATE", "DEFAULT_DEVICE", "TORC
                             "DETERMINISTIC_ALGORITHMS", "AUTOGRAD_SAVED_TENSORS_HOOKS", "SHAPE_ENV"})
 #: the guard source of an argument of the call itself: a parameter name, or a partial's ``args[i]``
 _ARGUMENT = re.compile(r"(args\[\d+\]|[A-Za-z_]\w*)")
+#: the locals of :func:`_calling`'s function that hold a partial's function and bound constants
+_BOUND = frozenset({"_bound_func", "_bound_args", "_bound_keywords"})
 
 
 def _direct_arguments(entries) -> list:
     """A ``guard_filter_fn`` keeping the guards on the call's own arguments and the global ones: not those
     on a partial's bound constants or a bound method's attributes (a lidar kernel: 80 checks per call)."""
-    return [entry.guard_type in _GLOBAL_GUARDS or bool(_ARGUMENT.fullmatch(entry.name)) for entry in entries]
+    return [entry.guard_type in _GLOBAL_GUARDS or (bool(_ARGUMENT.fullmatch(entry.name)) and entry.name not in _BOUND)
+            for entry in entries]
 
 
 def _guards_on(arguments: Sequence[str]) -> Callable:

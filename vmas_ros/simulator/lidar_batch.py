@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import functools
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import torch
 
@@ -199,6 +199,8 @@ class CompiledCast:
         #: cast inside the compiled step, as one of the world's state kernels (see :meth:`cast`)
         self._ride_along = ride_along
         self._handle: Optional[int] = None
+        #: (tables, sensors and filters) of a plan whose filters are all layout-static (see :meth:`cast`)
+        self._static_key: Optional[tuple] = None
 
     def cast(self, world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
         """Readings ``[B, R]`` of ``sensors``, or None when they cannot be cast together (see :func:`_kernel_constants`).
@@ -210,18 +212,11 @@ class CompiledCast:
         after a reset, it casts as usual). Off by default: inside discovery's
         step at 1,000 envs the fused cast ran 2.5x slower.
         """
-        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
-        layout = (tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
-        if self._plan is None or self._plan[0] != layout:
-            constants = _kernel_constants(world, sensors, targets)
-            cast = None if constants is None else functools.partial(lidar_kernel, **constants)
-            riding = None if cast is None or not self._ride_along else functools.partial(_of_state, cast)
-            self._plan = (layout, None if cast is None else WorldKernel(world, cast))
-            if self._ride_along:
-                if self._handle is None:
-                    self._handle = world.add_state_kernel(riding)
-                else:
-                    world.replace_state_kernel(self._handle, riding)
+        # lidars whose filters follow the tables only (sensors.CollidesWith) keep their targets as long as
+        # the world keeps its tables object: one identity test instead of ~25 us of layout Python per cast
+        known = self._static_key
+        if known is None or known[0] is not world.tables or known[1] != [(s, s.entity_filter) for s in sensors]:
+            self._plan_layout(world, sensors)
         kernel = self._plan[1]
         if kernel is None:
             return None
@@ -232,6 +227,34 @@ class CompiledCast:
         for sensor, reading in zip(sensors, readings):
             sensor._last_measurement = reading
         return readings
+
+    def _plan_layout(self, world, sensors: Sequence) -> None:
+        """Plan (and register the ride-along kernel) again when the layout the lidars see changed."""
+        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
+        layout = (tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
+        static = all(getattr(s.entity_filter, "layout_static", False) for s in sensors)
+        self._static_key = (world.tables, [(s, s.entity_filter) for s in sensors]) if static else None
+        if self._plan is not None and self._plan[0] == layout:
+            return
+        cast = castable(world, sensors, targets)
+        riding = None if cast is None or not self._ride_along else functools.partial(_of_state, cast)
+        self._plan = (layout, None if cast is None else WorldKernel(world, cast))
+        if self._ride_along:
+            if self._handle is None:
+                self._handle = world.add_state_kernel(riding)
+            else:
+                world.replace_state_kernel(self._handle, riding)
+
+
+def castable(world, sensors: Sequence, targets: Optional[tuple] = None) -> Optional[Callable[[torch.Tensor], torch.Tensor]]:
+    """``cast(q) -> [L, B, R]``: :func:`lidar_kernel` with these lidars' constants (a pure function of the
+    planar state, for a :class:`WorldKernel` or a state kernel), or None when they cannot be cast together
+    (targets other than spheres, differing ray counts or ranges, no targets). ``targets``: each lidar's
+    target ids, as :meth:`CompiledCast.cast` computes them (worked out here when not given)."""
+    if targets is None:
+        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
+    constants = _kernel_constants(world, sensors, targets)
+    return None if constants is None else functools.partial(lidar_kernel, **constants)
 
 
 def _of_state(cast, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
