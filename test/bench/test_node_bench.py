@@ -25,7 +25,7 @@ def _parse(argv):
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("node_bench")
     argv = ["node", "--duration", "0.5", "--repeats", "2", "--warmup", "0", "--no-progress", "--out", str(out),
-            "--scenario-kwargs", '{"n_agents": 2}', "--lidar-rays", "8"]
+            "--scenario-kwargs", '{"n_agents": 2}', "--lidar-rays", "8", "--unpaced-batch-ms", "3"]
     code = bench_cli.run_bench_command(_parse(argv))
     return code, out, json.loads((out / "node_benchmark.json").read_text())
 
@@ -37,6 +37,7 @@ def test_writes_csv_json_and_table(run):
         rows = list(csv.DictReader(handle))
     assert list(rows[0]) == NODE_COLUMNS and len(rows) == 2
     assert all(int(r["steps"]) > 0 and float(r["steps_per_s"]) > 0 for r in rows)
+    assert all(float(r["unpaced_batch_ms"]) == 3.0 for r in rows)  # the node ran with the option's value
     assert "steps/s" in (out / "node_benchmark.md").read_text()
     assert document["machine"]["torch"] and len(document["rows"]) == 2
 
@@ -64,3 +65,5 @@ def test_the_breakdown_covers_the_step(run):
 def test_bad_options_exit_2(tmp_path, capsys):
     code = bench_cli.run_bench_command(_parse(["node", "--duration", "0", "--out", str(tmp_path)]))
     assert code == 2 and "duration" in capsys.readouterr().err
+    code = bench_cli.run_bench_command(_parse(["node", "--unpaced-batch-ms", "-1", "--out", str(tmp_path)]))
+    assert code == 2 and "unpaced_batch_ms must be in [0, 1000]" in capsys.readouterr().err

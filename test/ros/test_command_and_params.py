@@ -114,7 +114,8 @@ def test_names_are_valid_ros_tokens_and_unique():
         ("num_envs", 0, "num_envs"), ("num_envs", 2.5, "integer"), ("scenario", "nope", "valid"),
         ("control", "bogus", "control"), ("real_time_factor", -1.0, ">= 0"), ("device", "tpu", "device"),
         ("scenario_kwargs", "[1, 2]", "mapping"), ("lidar_range", 0.0, "> 0"), ("add_lidar", "yes", "true or false"),
-        ("rate_hz", float("nan"), "finite"),
+        ("rate_hz", float("nan"), "finite"), ("unpaced_batch_ms", 1500.0, "[0, 1000]"),
+        ("unpaced_batch_ms", -0.5, "[0, 1000]"),
     ],
 )
 def test_bad_parameters_are_refused_with_a_reason(name, value, needle):

@@ -57,7 +57,7 @@ def test_a_burst_computes_its_steps_then_publishes_each_in_order(make_node, tmp_
     x, y = node.env.world.agents[0].state.pos[0].tolist()
     assert (pose.x, pose.y) == pytest.approx((x, y), abs=1e-6)
     for _ in range(3):
-        node._tick()  # unpaced: bursts for about UNPACED_BATCH_S
+        node._tick()  # unpaced: bursts for about unpaced_batch_ms
     steps = node.steps
     node.destroy_node()
     recorded = read_finished(bag)
@@ -82,3 +82,16 @@ def test_a_fault_mid_burst_comes_after_the_steps_before_it(make_node, tmp_path, 
     recorded = read_finished(bag)
     assert_whole_steps(recorded, DT_NS)
     assert len(recorded.steps()) == fault_step, "steps 0..4 recorded, the faulty one not"
+
+
+def test_unpaced_batch_ms_sets_how_long_a_tick_steps(make_node):
+    node = make_node(unpaced_batch_ms=0.0)  # the most responsive: one step per executor round
+    for expected in (1, 2, 3):
+        node._tick()
+        assert node.steps == expected
+    result = node.set_parameters([rclpy.parameter.Parameter("unpaced_batch_ms", value=50.0)])  # runtime
+    assert result[0].successful and node.params.unpaced_batch_ms == 50.0
+    node._tick()
+    assert node.steps >= 3 + 2, "50 ms of steps in one tick"
+    refused = node.set_parameters([rclpy.parameter.Parameter("unpaced_batch_ms", value=-1.0)])
+    assert not refused[0].successful and "unpaced_batch_ms must be in [0, 1000]" in refused[0].reason

@@ -34,7 +34,8 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 NODE_COLUMNS = [
-    "run_id", "scenario", "scenario_kwargs", "lidar_rays", "num_envs", "compiled", "window", "duration_s", "steps",
+    "run_id", "scenario", "scenario_kwargs", "lidar_rays", "num_envs", "compiled", "unpaced_batch_ms", "window",
+    "duration_s", "steps",
     "steps_per_s", "wall_us", "actions_us", "engine_us", "lidar_us", "convert_us", "publish_us", "executor_us",
     "profiled_steps_per_s", "cpu_us", "threads", "loadavg_1m",
 ]
@@ -58,6 +59,9 @@ def add_node_bench_arguments(parser: argparse.ArgumentParser) -> argparse.Argume
     node.add_argument("--subscribe", choices=("core", "all", "none"), default="core",
                       help="node: topics the subscriber process takes: core = pose, odom, scan, /clock (default); "
                            "all = also pose arrays, markers, observations, rewards; none = no subscriber")
+    node.add_argument("--unpaced-batch-ms", type=float, default=None,
+                      help="node: the node's unpaced_batch_ms, wall ms of steps per executor round (default: the "
+                           "node's, 4)")
     node.add_argument("--raw-subscriber", action="store_true",
                       help="node: the subscriber takes the serialised bytes without deserialising them")
     return parser
@@ -135,7 +139,8 @@ def _topics(node, kinds) -> Dict[str, str]:
 # ------------------------------------------------------------------- the run
 def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '{"n_agents": 4}', lidar_rays: int = 12, num_envs: int = 1,
                        duration: float = 3.0, repeats: int = 3, warmup: int = 1, subscribe: str = "core",
-                       raw_subscriber: bool = False, progress: bool = True, compile_physics: bool = False) -> dict:
+                       raw_subscriber: bool = False, progress: bool = True, compile_physics: bool = False,
+                       unpaced_batch_ms: Optional[float] = None) -> dict:
     """Measure the node; returns ``{"rows": [...per window...], "summary": {...}}``.
 
     ``compile_physics``: the node's ``compile_physics`` parameter; the first step compiles, inside the
@@ -159,8 +164,9 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
     node = None
     rows: List[dict] = []
     try:
+        extra = {} if unpaced_batch_ms is None else {"unpaced_batch_ms": float(unpaced_batch_ms)}
         node = SimNode(scenario=scenario, scenario_kwargs=scenario_kwargs, num_envs=num_envs, real_time_factor=0.0,
-                       add_lidar=lidar_rays > 0, lidar_rays=max(1, lidar_rays), compile_physics=compile_physics)
+                       add_lidar=lidar_rays > 0, lidar_rays=max(1, lidar_rays), compile_physics=compile_physics, **extra)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         kinds = {"core": CORE_KINDS, "all": ALL_KINDS, "none": ()}[subscribe]
@@ -192,6 +198,7 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
                 row = _row(run_id, scenario, scenario_kwargs, lidar_rays, num_envs, window - warmup, duration, steps, wall,
                            cpu, phases, profiled)
                 row["compiled"] = compile_physics
+                row["unpaced_batch_ms"] = node.params.unpaced_batch_ms
                 bar.set_postfix_str(f"{row['steps_per_s']:.0f} steps/s" + (" (warm-up)" if window < warmup else ""))
                 bar.update(1)
                 if window >= warmup:
@@ -299,7 +306,8 @@ def run_node_bench_command(args: argparse.Namespace) -> int:
                    duration=getattr(args, "duration", 3.0), repeats=getattr(args, "repeats", 3),
                    warmup=getattr(args, "warmup", 1), subscribe=getattr(args, "subscribe", "core"),
                    raw_subscriber=bool(getattr(args, "raw_subscriber", False)),
-                   compile_physics=bool(getattr(args, "compile_physics", False)))
+                   compile_physics=bool(getattr(args, "compile_physics", False)),
+                   unpaced_batch_ms=getattr(args, "unpaced_batch_ms", None))
     from vmas_ros.bench.timing import pinned_threads
 
     try:

@@ -13,7 +13,7 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 import yaml
 
 #: parameters that may change while the node runs; the others need a restart
-RUNTIME = {"env_index", "cmd_vel_timeout", "control", "real_time_factor", "rate_hz"}
+RUNTIME = {"env_index", "cmd_vel_timeout", "control", "real_time_factor", "rate_hz", "unpaced_batch_ms"}
 CONTROL_MODES = ("zero", "heuristic", "policy")
 DEVICES = ("cpu", "cuda", "auto")
 #: upper bounds that catch garbage (1e12 envs, a period rclpy cannot hold in int64 ns) before it runs
@@ -23,6 +23,8 @@ MAX_SEED = 2**32 - 1  # numpy's RandomState takes seeds in [0, 2**32)
 #: positive rates / time factors live in this range (0 keeps its "off" meaning where documented):
 #: rclpy turns 1/rate seconds into int64 nanoseconds, so 1e-12 Hz would overflow and kill the node
 MIN_RATE, MAX_RATE = 1e-3, 1e6
+#: unpaced_batch_ms above this would leave commands and services waiting for more than a second
+MAX_UNPACED_BATCH_MS = 1000.0
 #: parameters that name files: read once at start, never changed at runtime by a remote peer
 PATH_PARAMETERS = ("record_path", "policy_path")
 
@@ -40,6 +42,7 @@ class SimParams:
     seed: int = 0
     rate_hz: float = 0.0
     real_time_factor: float = 1.0
+    unpaced_batch_ms: float = 4.0
     frame_id: str = "world"
     add_lidar: bool = True
     lidar_rays: int = 16
@@ -125,6 +128,8 @@ def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Opti
         return f"{name} must be >= 0, got {value}"
     if name in ("rate_hz", "real_time_factor") and value != 0 and not MIN_RATE <= value <= MAX_RATE:
         return f"{name} must be 0 (off) or in [{MIN_RATE:g}, {MAX_RATE:g}], got {value}"
+    if name == "unpaced_batch_ms" and not 0 <= value <= MAX_UNPACED_BATCH_MS:
+        return f"unpaced_batch_ms must be in [0, {MAX_UNPACED_BATCH_MS:g}] (0: one step per executor round), got {value}"
     if name == "lidar_rays" and not 1 <= value <= MAX_LIDAR_RAYS:
         return f"lidar_rays must be in [1, {MAX_LIDAR_RAYS}], got {value}"
     if name == "lidar_range" and value <= 0:

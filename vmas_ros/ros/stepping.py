@@ -2,11 +2,11 @@
 
 A step is computed (actions, ``env.step``, the snapshot of env ``env_index``
 checked for finiteness) and then emitted (messages filled and published, the
-bag written). Unpaced, a timer callback computes up to ``UNPACED_BURST`` steps
-back to back before it emits them, in order, each with its own stamp: a step
-interleaved with publishing runs about 1.5x slower than back to back (the
-publishing between steps evicts the step's code and data from the caches),
-and subscribers receive every step either way. A step that fails is reported
+bag written). Unpaced, a timer callback steps for the ``unpaced_batch_ms``
+parameter's wall time, computing up to ``UNPACED_BURST`` steps back to back
+before it emits them, in order, each with its own stamp: a step interleaved
+with publishing ran about 1.2x slower than back to back (the publishing
+between steps evicts the step's code and data from the caches), and subscribers receive every step either way. A step that fails is reported
 (``SimulationFault``, naming the step and the part) only after the steps
 computed before it went out, so the bag and the subscribers end at the last
 good step, as they would one step at a time.
@@ -22,10 +22,8 @@ import numpy as np
 from vmas_ros.ros import convert
 from vmas_ros.ros.lifecycle import SimulationFault
 
-#: unpaced (real_time_factor 0, rate_hz 0): wall seconds of steps per timer callback
-UNPACED_BATCH_S = 0.002
 #: unpaced: at most this many steps are computed back to back before their messages go out
-UNPACED_BURST = 8
+UNPACED_BURST = 16
 
 
 @dataclass
@@ -50,9 +48,9 @@ class StepLoop:
         if self._timer.timer_period_ns != 0:
             self.step_once()
             return
-        # unpaced: one executor round costs about as much as a step, so keep stepping for about
-        # UNPACED_BATCH_S of wall time; commands and services wait at most that long
-        end = time.perf_counter() + UNPACED_BATCH_S
+        # unpaced: one executor round costs about as much as half a step, so keep stepping for about
+        # unpaced_batch_ms of wall time; commands and services wait about that long at most
+        end = time.perf_counter() + self.params.unpaced_batch_ms / 1000.0
         while True:
             self._run_steps(UNPACED_BURST, end)
             if time.perf_counter() >= end or self.paused or not self.context.ok():
