@@ -337,6 +337,28 @@ def ros():
 
 
 @pytest.fixture(scope="module")
+def rclpy_context():
+    """An rclpy context of the module's own, for nodes built in the test process (no signal handlers)."""
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    yield context
+    rclpy.shutdown(context=context)
+
+
+@pytest.fixture
+def on_test_context(rclpy_context, monkeypatch):
+    """Nodes built during the test join ``rclpy_context`` (SimNode builds its rclpy Node on the default one)."""
+    init = rclpy.node.Node.__init__
+
+    def on_context(self, *args, **kwargs):
+        kwargs.setdefault("context", rclpy_context)
+        return init(self, *args, **kwargs)
+
+    monkeypatch.setattr(rclpy.node.Node, "__init__", on_context)
+    return rclpy_context
+
+
+@pytest.fixture(scope="module")
 def sim_log_dir(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("sim_node_logs")
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import pytest
-import rclpy
 
 import vmas_ros
 from vmas_ros.ros.sim_node import SimNode
@@ -14,18 +13,8 @@ from vmas_ros.scenarios import list_scenarios
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture(scope="module")
-def rclpy_context():
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
-
-
 @pytest.mark.parametrize("scenario", list_scenarios())
-def test_scenario_steps_and_publishes_in_sim_node(scenario, rclpy_context, monkeypatch):
-    # SimNode builds its rclpy Node on the default context; point it at this module's
-    monkeypatch.setattr(rclpy.node.Node, "__init__", _with_context(rclpy.node.Node.__init__, rclpy_context))
+def test_scenario_steps_and_publishes_in_sim_node(scenario, on_test_context):
     node = SimNode(scenario=scenario, control="heuristic", num_envs=2, env_index=1, lidar_rays=6)
     try:
         messages = node.state_messages  # what the node published last, decoded from its bytes
@@ -49,19 +38,10 @@ def test_scenario_steps_and_publishes_in_sim_node(scenario, rclpy_context, monke
         node.destroy_node()
 
 
-def _with_context(init, context):
-    def patched(self, *args, **kwargs):
-        kwargs.setdefault("context", context)
-        return init(self, *args, **kwargs)
-
-    return patched
-
-
 @pytest.mark.slow
-def test_compiled_node_publishes_what_the_eager_node_publishes(rclpy_context, monkeypatch):
+def test_compiled_node_publishes_what_the_eager_node_publishes(on_test_context):
     """compile_physics: true steps through torch.compile (physics, the node's lidar casts and the published
     env's snapshot); the published poses and scans equal the eager node's to float rounding."""
-    monkeypatch.setattr(rclpy.node.Node, "__init__", _with_context(rclpy.node.Node.__init__, rclpy_context))
     nodes = [SimNode(scenario="simple_spread", scenario_kwargs='{"n_agents": 4}', control="heuristic", lidar_rays=12,
                      compile_physics=compiled) for compiled in (False, True)]
     try:

@@ -53,10 +53,13 @@ def test_the_step_computes_the_snapshot_of_the_published_env(device):
         moved_into_view |= any((s < 2.0).any() for ss in snap.scans.values() for s in ss)
         assert ride.take(world, 1) is None, "handed out once"
     assert moved_into_view, "some ray hits something (the scans are not all max_range)"
-    # the published env changes: planned again, then that env's snapshot
+    # the published env changes: gathered by the caller once, then that env's snapshot from the same
+    # kernel (the env is a tensor the compiled step reads: no new kernel, no new compile)
+    kernel = world._state_kernels[ride._handle]
     assert ride.take(world, 0) is None
     _step(env, 7)
     _assert_same(ride.take(world, 0), convert.Snapshot.take(world, 0, lidars))
+    assert world._state_kernels[ride._handle] is kernel
     # the state changed after the step (a setter): not the step's snapshot any more
     _step(env, 8)
     world.agents[0].set_pos(torch.zeros(env.num_envs, 2, device=env.device), batch_index=None)

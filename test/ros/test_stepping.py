@@ -3,7 +3,7 @@ leaves the steps before it published and recorded (in-process node, real rclpy, 
 from __future__ import annotations
 
 import pytest
-import rclpy
+from rclpy.parameter import Parameter
 
 import test.ros.faulty_sim  # noqa: F401 - registers the faulty_spread scenario
 from test.ros.fault_tools import assert_whole_steps, read_finished
@@ -16,24 +16,9 @@ pytestmark = pytest.mark.ros
 DT_NS = 100_000_000  # simple_spread's dt
 
 
-@pytest.fixture(scope="module")
-def rclpy_context():
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
-
-
 @pytest.fixture
-def make_node(rclpy_context, monkeypatch):
-    """SimNode(**params) on this module's context; destroyed (its bag closed) at the end of the test."""
-    init = rclpy.node.Node.__init__
-
-    def on_context(self, *args, **kwargs):
-        kwargs.setdefault("context", rclpy_context)
-        return init(self, *args, **kwargs)
-
-    monkeypatch.setattr(rclpy.node.Node, "__init__", on_context)
+def make_node(on_test_context):
+    """SimNode(**params), unpaced, on the module's rclpy context; destroyed (its bag closed) after the test."""
     nodes = []
 
     def make(**params):
@@ -89,9 +74,9 @@ def test_unpaced_batch_ms_sets_how_long_a_tick_steps(make_node):
     for expected in (1, 2, 3):
         node._tick()
         assert node.steps == expected
-    result = node.set_parameters([rclpy.parameter.Parameter("unpaced_batch_ms", value=50.0)])  # runtime
+    result = node.set_parameters([Parameter("unpaced_batch_ms", value=50.0)])  # runtime
     assert result[0].successful and node.params.unpaced_batch_ms == 50.0
     node._tick()
     assert node.steps >= 3 + 2, "50 ms of steps in one tick"
-    refused = node.set_parameters([rclpy.parameter.Parameter("unpaced_batch_ms", value=-1.0)])
+    refused = node.set_parameters([Parameter("unpaced_batch_ms", value=-1.0)])
     assert not refused[0].successful and "unpaced_batch_ms must be in [0, 1000]" in refused[0].reason

@@ -24,14 +24,15 @@ from vmas_ros.ros.publish import RIDE_ALONG_MAX_ELEMENTS
 from vmas_ros.simulator.lidar_batch import castable
 
 
-def published_env(env_index: int, cast, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """Env ``env_index`` as one vector: its ``[3, N]`` positions and angles, ``[3, N]`` velocities, every
-    lidar's ranges in order (``cast(q)`` ``[L, B, R]``; None: no lidars), and last 1 when the state is
-    finite and no range is NaN, else 0 (``Snapshot.all_finite``). A state kernel: pure in ``q``, ``v``."""
-    state = torch.cat([q[:, :, env_index].reshape(-1), v[:, :, env_index].reshape(-1)])
+def published_env(env_index: torch.Tensor, cast, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """Env ``env_index`` (a one-element index tensor) as one vector: its ``[3, N]`` positions and angles,
+    ``[3, N]`` velocities, every lidar's ranges in order (``cast(q)`` ``[L, B, R]``; None: no lidars), and
+    last 1 when the state is finite and no range is NaN, else 0 (``Snapshot.all_finite``). A state kernel:
+    pure in ``q``, ``v``; the index is a tensor so that another env needs no new compiled step."""
+    state = torch.cat([q.index_select(2, env_index).reshape(-1), v.index_select(2, env_index).reshape(-1)])
     parts, finite = [state], torch.isfinite(state).all()
     if cast is not None:
-        ranges = cast(q)[:, env_index].reshape(-1).to(q.dtype)
+        ranges = cast(q).index_select(1, env_index).reshape(-1).to(q.dtype)
         parts.append(ranges)
         finite = finite & ~torch.isnan(ranges).any()
     parts.append(finite.to(q.dtype).reshape(1))
@@ -42,17 +43,20 @@ class RideAlongSnapshot:
     """``take(world, env_index)``: the step's own snapshot of env ``env_index``, or None (gather it yourself).
 
     ``lidars`` is ``convert.agent_lidars(world)``; the scans come in its order,
-    as ``Snapshot.take`` lays them out. The plan (the kernel's env, its lidar
-    constants) follows the world's tables, the env index and the lidars'
-    filters; a change registers a new kernel, which the next step computes
-    (that step's snapshot is compiled anew once).
+    as ``Snapshot.take`` lays them out. The plan (the lidar constants) follows
+    the world's tables and the lidars' filters: a change registers a new
+    kernel, which the next compiled step compiles anew. Another env index is
+    written into the kernel's index tensor (no new compile); either way the
+    snapshot right after the change is gathered by the caller.
     """
 
     def __init__(self, lidars: Dict[int, list]) -> None:
         self._sensors = [sensor for sensors in lidars.values() for sensor in sensors]
         self._rays = {i: [sensor.n_rays for sensor in sensors] for i, sensors in lidars.items()}
         self._handle: Optional[int] = None
-        self._key: Optional[tuple] = None  # (tables, env index, [(sensor, filter)]) of the registered kernel
+        self._key: Optional[tuple] = None  # (tables, [(sensor, filter)]) of the registered kernel
+        self._index: Optional[torch.Tensor] = None  # the env the kernel gathers, read by every compiled step
+        self._computing: Optional[int] = None  # the env index in it since the last step
         self.active = False  # the registered kernel computes the whole snapshot
 
     @staticmethod
@@ -63,24 +67,29 @@ class RideAlongSnapshot:
 
     def take(self, world, env_index: int) -> Optional[Snapshot]:
         key = self._key
-        if (key is None or key[0] is not world.tables or key[1] != env_index
-                or key[2] != [(s, s.entity_filter) for s in self._sensors]):
+        if key is None or key[0] is not world.tables or key[1] != [(s, s.entity_filter) for s in self._sensors]:
             self._plan(world, env_index)
             return None  # this state was computed with the old plan
+        if env_index != self._computing:
+            self._index.fill_(env_index)  # the next step gathers this env
+            self._computing = env_index
+            return None
         if not self.active:
             return None
         host = world.take_state_kernel_output(self._handle)
         if host is None:  # a reset or a setter since the step
             return None
-        return Snapshot.of_host(host.numpy(), self._rays, verdict=True)
+        return Snapshot.of_host(host.cpu().numpy(), self._rays, verdict=True)
 
     def _plan(self, world, env_index: int) -> None:
-        self._key = (world.tables, env_index, [(s, s.entity_filter) for s in self._sensors])
+        self._key = (world.tables, [(s, s.entity_filter) for s in self._sensors])
+        self._index = torch.tensor([env_index], device=world.device)
+        self._computing = env_index
         # the lidar constants hold each lidar's targets: only filters that follow the tables keep them valid
         static = all(getattr(s.entity_filter, "layout_static", False) for s in self._sensors)
         cast = castable(world, self._sensors) if self._sensors and static else None
         self.active = not self._sensors or cast is not None
-        kernel = functools.partial(published_env, env_index, cast) if self.active else None
+        kernel = functools.partial(published_env, self._index, cast) if self.active else None
         if self._handle is None:
             if kernel is not None:
                 self._handle = world.add_state_kernel(kernel)
