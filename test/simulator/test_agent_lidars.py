@@ -85,40 +85,6 @@ def test_compiled_worlds_cast_all_lidars_in_one_graph_close_to_measure(device):
     assert (readings[1] < agents[1].sensors[0].max_range).any()
 
 
-@pytest.mark.slow
-def test_a_riding_cast_is_computed_by_the_compiled_step_and_equals_measure(device):
-    """CompiledCast(ride_along=True) (sim_node's lidars) is one of the world's state kernels: right after a
-    compiled step the cast only takes the step's output; after the state changed it casts itself. Both
-    equal Lidar.measure() to float rounding."""
-    from vmas_ros.simulator.sensors import CollidesWith, Lidar
-
-    env = make_env("simple_spread", num_envs=2, device=device, seed=4, n_agents=4)
-    world = env.world
-    for agent in world.agents:
-        agent.add_sensor(Lidar(world, n_rays=12, max_range=2.0, entity_filter=CollidesWith(agent)))
-    world.compile_physics()
-    sensors = [a.sensors[0] for a in world.agents]
-    cast = lidar_batch.CompiledCast(ride_along=True)
-    cast.cast(world, sensors)  # plans, and registers its state kernel
-    for step in range(3):
-        env.step([torch.rand(2, 2, generator=torch.Generator().manual_seed(step)).to(device) * 2 - 1 for _ in sensors])
-        calls = []
-        kernel = cast._plan[1]
-        counted = lambda q, kernel=kernel: calls.append(1) or kernel(q)  # noqa: E731
-        cast._plan = (cast._plan[0], counted)
-        readings = cast.cast(world, sensors)
-        assert cast._plan[1] is counted, "same layout: not planned again"
-        assert not calls, "right after a compiled step the readings come from the step's own graph"
-        for sensor, reading in zip(sensors, readings):
-            torch.testing.assert_close(reading, sensor.measure(), rtol=1e-5, atol=1e-5)
-    world.agents[0].set_pos(world.agents[1].state.pos + torch.tensor([0.0, 0.4], device=device), batch_index=None)
-    readings = cast.cast(world, sensors)
-    assert calls, "the state changed after the step: cast anew"
-    for sensor, reading in zip(sensors, readings):
-        torch.testing.assert_close(reading, sensor.measure(), rtol=1e-5, atol=1e-5)
-    assert (readings[1] < 2.0).any(), "agent 0 moved next to agent 1 is seen"
-
-
 def test_layout_static_filters_are_asked_once_per_tables(device):
     """A CollidesWith filter (layout_static) is evaluated once per world tables; a collision property
     change (new tables) asks it again. Other filters are asked on every call."""

@@ -31,9 +31,6 @@ from vmas_ros.ros import convert
 from vmas_ros.ros.cdr import serialize_zeroed
 from vmas_ros.ros.topic_audit import quiet_publisher_events
 
-#: up to this many envs x rays the node's lidars are cast inside the compiled step (CompiledCast ride_along)
-RIDE_ALONG_MAX_ELEMENTS = 4096
-
 
 def type_name(message_type) -> str:
     """``pkg/msg/Name`` of a message class (e.g. sensor_msgs/msg/LaserScan)."""
@@ -310,12 +307,10 @@ class LidarReadings:
     so it describes the new state) and measures the others.
     """
 
-    def __init__(self, lidars: Dict[int, list], ride_along: bool = True) -> None:
+    def __init__(self, lidars: Dict[int, list]) -> None:
         from vmas_ros.simulator.lidar_batch import BatchedLidars
 
         self.lidars = lidars
-        #: compiled worlds with few envs: cast inside the step (off where a RideAlongSnapshot casts there already)
-        self._ride_along = ride_along
         self._marks: Optional[Dict[int, list]] = None
         self._batched = BatchedLidars()
         self._compiled: Dict[tuple, object] = {}  # per group: a CompiledCast, for worlds that compile their physics
@@ -345,9 +340,7 @@ class LidarReadings:
             if world.physics_compiled:  # one compiled cast (equal to measure() to float rounding)
                 from vmas_ros.simulator.lidar_batch import CompiledCast
 
-                # a few envs (the node's case): cast inside the compiled step itself (see CompiledCast)
-                ride = self._ride_along and world.batch_dim * key[0] <= RIDE_ALONG_MAX_ELEMENTS
-                batched = self._compiled.setdefault(key, CompiledCast(ride_along=ride)).cast(world, sensors)
+                batched = self._compiled.setdefault(key, CompiledCast()).cast(world, sensors)
             if batched is None:
                 batched = self._batched.cast(world, sensors)
             for k, (i, j, sensor) in enumerate(group):

@@ -20,8 +20,10 @@ from typing import Dict, Optional
 import torch
 
 from vmas_ros.ros.convert import Snapshot
-from vmas_ros.ros.publish import RIDE_ALONG_MAX_ELEMENTS
-from vmas_ros.simulator.lidar_batch import castable
+from vmas_ros.simulator.lidar_batch import castable, layout_static, lidar_layout, same_lidar_layout
+
+#: up to this many envs x rays the step gathers the snapshot (above, one more pass over the batch per step)
+RIDE_ALONG_MAX_ELEMENTS = 4096
 
 
 def published_env(env_index: torch.Tensor, cast, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -54,7 +56,7 @@ class RideAlongSnapshot:
         self._sensors = [sensor for sensors in lidars.values() for sensor in sensors]
         self._rays = {i: [sensor.n_rays for sensor in sensors] for i, sensors in lidars.items()}
         self._handle: Optional[int] = None
-        self._key: Optional[tuple] = None  # (tables, [(sensor, filter)]) of the registered kernel
+        self._key: Optional[tuple] = None  # lidar_batch.lidar_layout() of the registered kernel
         self._index: Optional[torch.Tensor] = None  # the env the kernel gathers, read by every compiled step
         self._computing: Optional[int] = None  # the env index in it since the last step
         self.active = False  # the registered kernel computes the whole snapshot
@@ -66,8 +68,7 @@ class RideAlongSnapshot:
         return bool(world.physics_compiled) and world.batch_dim * rays <= RIDE_ALONG_MAX_ELEMENTS
 
     def take(self, world, env_index: int) -> Optional[Snapshot]:
-        key = self._key
-        if key is None or key[0] is not world.tables or key[1] != [(s, s.entity_filter) for s in self._sensors]:
+        if self._handle is None or not same_lidar_layout(self._key, world, self._sensors):
             self._plan(world, env_index)
             return None  # this state was computed with the old plan
         if env_index != self._computing:
@@ -82,17 +83,15 @@ class RideAlongSnapshot:
         return Snapshot.of_host(host.cpu().numpy(), self._rays, verdict=True)
 
     def _plan(self, world, env_index: int) -> None:
-        self._key = (world.tables, [(s, s.entity_filter) for s in self._sensors])
+        # the lidar constants hold each lidar's targets: only filters that follow the tables keep them valid
+        self._key = lidar_layout(world, self._sensors)
         self._index = torch.tensor([env_index], device=world.device)
         self._computing = env_index
-        # the lidar constants hold each lidar's targets: only filters that follow the tables keep them valid
-        static = all(getattr(s.entity_filter, "layout_static", False) for s in self._sensors)
-        cast = castable(world, self._sensors) if self._sensors and static else None
+        cast = castable(world, self._sensors) if self._sensors and layout_static(self._sensors) else None
         self.active = not self._sensors or cast is not None
         kernel = functools.partial(published_env, self._index, cast) if self.active else None
         if self._handle is None:
-            if kernel is not None:
-                self._handle = world.add_state_kernel(kernel)
+            self._handle = world.add_state_kernel(kernel)
         else:
             world.replace_state_kernel(self._handle, kernel)
 

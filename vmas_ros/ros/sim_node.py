@@ -192,7 +192,7 @@ class SimNode(StepLoop, Node):
         self.state_pub = StatePublisher(self, self.state_messages, RELIABLE)
         # compiled, few envs: the step itself gathers env_index's state and scans (ride_along.py)
         self.ride_along = RideAlongSnapshot(self.lidars) if RideAlongSnapshot.suits(world, self.lidars) else None
-        self.lidar_readings = LidarReadings(self.lidars, ride_along=self.ride_along is None)
+        self.lidar_readings = LidarReadings(self.lidars)
         self.phases: Optional[StepPhases] = None  # set by `vmas-ros bench node` to time each part of a step
         self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
         if self.tf_pub is None:

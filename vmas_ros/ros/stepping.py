@@ -97,19 +97,20 @@ class StepLoop:
             stage = "publish"
             return self._gather()
         except Exception as error:
-            if not self.context.ok():  # a publish raced the shutdown a signal started: not a fault
-                raise
-            step = self.steps if stage == "publish" else self.steps + 1
-            raise self._fault(stage, error, step) from (error.__cause__ if isinstance(error, SimulationFault) else error)
+            self._raise_fault(stage, error, self.steps if stage == "publish" else self.steps + 1)
 
     def _emit_step(self, step: ComputedStep) -> None:
         try:
             self._emit(step)
         except Exception as error:
-            if not self.context.ok():
-                raise
-            raise self._fault("publish", error, step.steps) from (
-                error.__cause__ if isinstance(error, SimulationFault) else error)
+            self._raise_fault("publish", error, step.steps)
+
+    def _raise_fault(self, stage: str, error: Exception, step: int) -> None:
+        """Re-raise ``error`` as the SimulationFault of ``step`` (as it is while a signal shuts the node down:
+        a publish that raced the shutdown is no fault)."""
+        if not self.context.ok():
+            raise error
+        raise self._fault(stage, error, step) from (error.__cause__ if isinstance(error, SimulationFault) else error)
 
     def _fault(self, stage: str, error: Exception, step: int) -> SimulationFault:
         """A SimulationFault naming the step, the failing part and what was published."""

@@ -191,59 +191,48 @@ class CompiledCast:
     Python around its compiled kernel (discovery at 1,000 envs: 5 casts,
     ~100 us each, against ~30 us for all five in one graph). Entity filters
     may depend on the state, and entities may be added, so the layout is
-    checked on every cast and a change plans (and compiles) again.
+    checked on every cast and a change plans (and compiles) again; lidars
+    whose filters are all layout-static keep their plan while the world keeps
+    its tables (see :func:`layout_static`).
     """
 
-    def __init__(self, ride_along: bool = False) -> None:
+    def __init__(self) -> None:
         self._plan: Optional[tuple] = None  # (layout it was planned for, WorldKernel or None)
-        #: cast inside the compiled step, as one of the world's state kernels (see :meth:`cast`)
-        self._ride_along = ride_along
-        self._handle: Optional[int] = None
-        #: (tables, sensors and filters) of a plan whose filters are all layout-static (see :meth:`cast`)
-        self._static_key: Optional[tuple] = None
+        self._static: Optional[tuple] = None  # lidar_layout() of the plan, when its filters are layout-static
 
     def cast(self, world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
-        """Readings ``[B, R]`` of ``sensors``, or None when they cannot be cast together (see :func:`_kernel_constants`).
-
-        With ``ride_along`` (sim_node, a few envs), the cast is also one of
-        the world's state kernels: every compiled step computes it in its own
-        graph, and a cast right after the step only takes that output (one
-        compiled call per step instead of two; where it does not apply, e.g.
-        after a reset, it casts as usual). Off by default: inside discovery's
-        step at 1,000 envs the fused cast ran 2.5x slower.
-        """
-        # lidars whose filters follow the tables only (sensors.CollidesWith) keep their targets as long as
-        # the world keeps its tables object: one identity test instead of ~25 us of layout Python per cast
-        known = self._static_key
-        if known is None or known[0] is not world.tables or known[1] != [(s, s.entity_filter) for s in sensors]:
-            self._plan_layout(world, sensors)
+        """Readings ``[B, R]`` of ``sensors``, or None when they cannot be cast together (see :func:`_kernel_constants`)."""
+        if not same_lidar_layout(self._static, world, sensors):
+            targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
+            layout = (tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
+            self._static = lidar_layout(world, sensors) if layout_static(sensors) else None
+            if self._plan is None or self._plan[0] != layout:
+                cast = castable(world, sensors, targets)
+                self._plan = (layout, None if cast is None else WorldKernel(world, cast))
         kernel = self._plan[1]
         if kernel is None:
             return None
-        stacked = None if self._handle is None else world.take_state_kernel_output(self._handle)
-        if stacked is None:
-            stacked = kernel(world.planar_state()[0])
-        readings = list(stacked.unbind(0))
+        readings = list(kernel(world.planar_state()[0]).unbind(0))
         for sensor, reading in zip(sensors, readings):
             sensor._last_measurement = reading
         return readings
 
-    def _plan_layout(self, world, sensors: Sequence) -> None:
-        """Plan (and register the ride-along kernel) again when the layout the lidars see changed."""
-        targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
-        layout = (tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
-        static = all(getattr(s.entity_filter, "layout_static", False) for s in sensors)
-        self._static_key = (world.tables, [(s, s.entity_filter) for s in sensors]) if static else None
-        if self._plan is not None and self._plan[0] == layout:
-            return
-        cast = castable(world, sensors, targets)
-        riding = None if cast is None or not self._ride_along else functools.partial(_of_state, cast)
-        self._plan = (layout, None if cast is None else WorldKernel(world, cast))
-        if self._ride_along:
-            if self._handle is None:
-                self._handle = world.add_state_kernel(riding)
-            else:
-                world.replace_state_kernel(self._handle, riding)
+
+def layout_static(sensors: Sequence) -> bool:
+    """Whether every lidar's filter answers from the tables only (``sensors.CollidesWith``), so that
+    its targets last as long as the world's tables object."""
+    return all(getattr(s.entity_filter, "layout_static", False) for s in sensors)
+
+
+def lidar_layout(world, sensors: Sequence) -> tuple:
+    """The world's tables object and the (sensor, filter) pairs: what layout-static lidars' targets follow."""
+    return world.tables, [(s, s.entity_filter) for s in sensors]
+
+
+def same_lidar_layout(known: Optional[tuple], world, sensors: Sequence) -> bool:
+    """Whether ``known`` (a :func:`lidar_layout`) still holds: one identity test, not ~25 us of target
+    search per cast."""
+    return known is not None and known[0] is world.tables and known[1] == [(s, s.entity_filter) for s in sensors]
 
 
 def castable(world, sensors: Sequence, targets: Optional[tuple] = None) -> Optional[Callable[[torch.Tensor], torch.Tensor]]:
@@ -255,11 +244,6 @@ def castable(world, sensors: Sequence, targets: Optional[tuple] = None) -> Optio
         targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
     constants = _kernel_constants(world, sensors, targets)
     return None if constants is None else functools.partial(lidar_kernel, **constants)
-
-
-def _of_state(cast, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """``cast(q)`` as a state kernel (a function of the new ``q`` and ``v``)."""
-    return cast(q)
 
 
 def _kernel_constants(world, sensors: Sequence, targets: tuple) -> Optional[dict]:
