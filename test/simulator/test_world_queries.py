@@ -75,3 +75,55 @@ def test_queries_are_per_env(device):
         world.get_distance_from_point(a, T([[1.0, 0.0]] * 3, device)),
         T([0.9, 0.4, math.hypot(0.95, 0.05) - 0.1], device),
     )
+
+
+# ------------------------------------------------------------------ collides
+def _pair(world_cls, agent_cls, landmark_cls, shapes, kinds, filters, positions, device):
+    """A world of two entities ``a`` and ``b`` built with the given engine's classes."""
+    world = world_cls(batch_dim=2, device=device)
+    entities = []
+    for name, shape, kind, keep, pos in zip("ab", shapes, kinds, filters, positions):
+        if kind == "agent":
+            entity = agent_cls(name=name, shape=shape)
+            world.add_agent(entity)
+        else:
+            entity = landmark_cls(name=name, shape=shape, collide=kind != "ghost", movable=kind == "movable")
+            world.add_landmark(entity)
+        if not keep:
+            entity.collision_filter = lambda other: False
+        entities.append(entity)
+    for i, (entity, pos) in enumerate(zip(entities, positions)):  # env 1: far apart
+        entity.set_pos(torch.tensor([pos, [5.0 * i, 5.0]], device=device, dtype=torch.float32), batch_index=None)
+    return world, entities
+
+
+# (shape kinds, entity kinds (agent / static / movable / ghost: no collide), filters keep?, positions, expected)
+COLLIDES = {
+    "agents near": (("sphere", "sphere"), ("agent", "agent"), (True, True), ((0, 0), (0.15, 0)), True),
+    "agents far": (("sphere", "sphere"), ("agent", "agent"), (True, True), ((0, 0), (0.3, 0.1)), False),
+    "agent and wall": (("sphere", "line"), ("agent", "static"), (True, True), ((0, 0), (0.1, 0)), True),
+    "two walls": (("line", "line"), ("static", "static"), (True, True), ((0, 0), (0.1, 0)), False),
+    "ghost landmark": (("sphere", "box"), ("agent", "ghost"), (True, True), ((0, 0), (0.1, 0)), False),
+    "filtered out": (("sphere", "sphere"), ("agent", "agent"), (True, False), ((0, 0), (0.1, 0)), False),
+    "box and box": (("box", "box"), ("agent", "movable"), (True, True), ((0, 0), (0.2, 0.2)), True),
+}
+
+
+def _shape(kind, module):
+    return {"sphere": lambda: module.Sphere(0.1), "line": lambda: module.Line(0.4), "box": lambda: module.Box(0.2, 0.2)}[kind]()
+
+
+@pytest.mark.parametrize("case", list(COLLIDES))
+def test_collides_matches_vmas(device, case):
+    """``World.collides`` answers as VMAS 1.5's does (collide flags, filters, static pairs, reach in any env)."""
+    import vmas.simulator.core as upstream
+
+    from vmas_ros.simulator import core as ours
+
+    kinds, roles, filters, positions, expected = COLLIDES[case]
+    answers = []
+    for module in (ours, upstream):
+        shapes = [_shape(k, module) for k in kinds]
+        world, (a, b) = _pair(module.World, module.Agent, module.Landmark, shapes, roles, filters, positions, device)
+        answers.append((world.collides(a, b), world.collides(b, a), world.collides(a, a)))
+    assert answers[0] == answers[1] == (expected, expected, False), answers

@@ -23,7 +23,7 @@ from vmas_ros.simulator.entities import Agent, Entity, Landmark
 from vmas_ros.simulator.layout import split_xy_stacked, stack_into
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.state_store import StateStore
-from vmas_ros.simulator.tables import WorldTables, build_tables
+from vmas_ros.simulator.tables import PAIR_KINDS, WorldTables, build_tables
 from vmas_ros.simulator.utils import (
     ANGULAR_FRICTION,
     COLLISION_FORCE,
@@ -38,6 +38,9 @@ from vmas_ros.simulator.world_state import StateAccess
 from vmas_ros.simulator.world_rays import RayQueries
 
 __all__ = ["World"]
+
+#: shape-kind pairs a collision kernel exists for, each sorted by name
+_COLLIDABLE_KINDS = frozenset(tuple(sorted(kinds)) for kinds in PAIR_KINDS)
 
 
 def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.StepParams, actions,
@@ -450,6 +453,25 @@ class World(RayQueries, ActionInputs, StateAccess):
         else:
             raise TypeError(f"distance between {a.shape!r} and {b.shape!r} is not supported")
         return self._pick(value, env_index)
+
+    def collides(self, entity_a: Entity, entity_b: Entity) -> bool:
+        """Could the two entities exert contact forces on each other now, in some env?
+
+        VMAS 1.5's query: both want to collide with the other (``collide`` and
+        each one's ``collision_filter``), at least one can move or turn, a
+        collision kernel exists for their shapes, and in at least one env their
+        centres are within the sum of their circumscribed radii. A query for
+        scenarios, not part of the step: it reads that last test back to the host.
+        """
+        a, b = entity_a, entity_b
+        if a is b or not a.collides(b) or not b.collides(a):
+            return False
+        if not (a.movable or a.rotatable or b.movable or b.rotatable):
+            return False
+        if tuple(sorted((a.shape.kind, b.shape.kind))) not in _COLLIDABLE_KINDS:
+            return False
+        reach = a.shape.circumscribed_radius() + b.shape.circumscribed_radius()
+        return bool((torch.linalg.vector_norm(a.state.pos - b.state.pos, dim=-1) <= reach).any())
 
     def is_overlapping(self, entity_a: Entity, entity_b: Entity, env_index=None) -> Tensor:
         """Bool per env: do the two shapes touch (a sphere inside a solid box counts)?"""
