@@ -44,12 +44,17 @@ def copy_random_state(up, ours, seed: int, spread: float, agents_only: bool = Fa
 def copy_state(up, ours) -> None:
     """Give every entity of ours upstream's ``FIELDS`` (pos, vel, rot, ang_vel) in every env.
 
-    The worlds must list the same entities under the same names, in the same order.
+    The worlds must list the same entities under the same names, in the same
+    order. Moving a joint's end re-places its rod between the ends, so the
+    rods (which come before the agents) get their own state back in a second pass.
     """
     assert [e.name for e in up.world.entities] == [e.name for e in ours.world.entities]
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        for field_name in FIELDS:
-            getattr(e_ours, f"set_{field_name}")(getattr(e_up.state, field_name).clone(), batch_index=None)
+    for _ in range(2):
+        for e_up, e_ours in zip(up.world.entities, ours.world.entities):
+            for field_name in FIELDS:
+                value = getattr(e_up.state, field_name)
+                if not torch.equal(getattr(e_ours.state, field_name), value):
+                    getattr(e_ours, f"set_{field_name}")(value.clone(), batch_index=None)
 
 
 def uniform_actions(env, gen: torch.Generator) -> List[torch.Tensor]:
