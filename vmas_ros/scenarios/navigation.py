@@ -1,0 +1,351 @@
+"""navigation: every agent drives to its own goal without bumping into the others.
+
+Description
+    ``n_agents`` discs (radius ``agent_radius``, holonomic, force actions in
+    [-1, 1]) and as many goal marks (non-colliding discs of radius 0.05, one
+    per agent, in the agent's colour) in an unbounded plane, or inside walls
+    at ``+-world_spawning_x``/``+-world_spawning_y`` with ``enforce_bounds``.
+    Each agent must reach its goal; with ``collisions`` the agents collide
+    with one another and carry a lidar (``n_lidar_rays`` rays evenly round
+    the circle, range ``lidar_range``) that sees the other agents. Goals may
+    be shared: with ``agents_with_same_goal = k`` the first ``k`` agents go to
+    one goal (then ``collisions`` must be off); with ``split_goals`` the first
+    and the second half of the team each share one goal. This is the
+    navigation task of the VMAS paper (and of the BenchMARL/TorchRL tutorials).
+Observation (per agent, in this order)
+    own position (2), own velocity (2); its position minus its goal's (2) or,
+    with ``observe_all_goals``, its position minus every agent's goal in agent
+    order (2 x n_agents); with ``collisions``, the lidar's proximities
+    ``lidar_range - distance`` (``n_lidar_rays``; 0 where a ray hits nothing,
+    ray ``k`` at angle ``2 pi k / n_lidar_rays``).
+Reward
+    The decrease since the last step of the agent's distance to its goal
+    (x ``pos_shaping_factor``); with ``shared_rew`` the decrease of the
+    team's summed distances instead. Plus ``final_reward`` in every step in
+    which every agent is within 0.05 (the goal's radius) of its goal, and
+    ``agent_collision_penalty`` for every other agent whose surface is within
+    0.005 of its own. As in VMAS 1.5, a pair of agents is penalised only in
+    steps where it overlaps (centres within two radii) in at least one env of
+    the batch: the world's broad-phase test for the pair is batch-wide.
+    ``info`` reports ``pos_rew`` (the shaping term the agent earned),
+    ``final_rew`` and ``agent_collisions``.
+Starting state
+    Agents, then one goal per agent, uniform in ``[-world_spawning_x,
+    world_spawning_x] x [-world_spawning_y, world_spawning_y]``, every two at
+    least ``2 agent_radius + 0.05`` apart; all at rest. Shared goals take the
+    position drawn for the goal of the first agent sharing it (the unused
+    draws still keep the others away from it).
+Episode termination
+    When every agent is closer to its goal than its own radius
+    (``agent_radius``, not the goal's: VMAS 1.5's rule).
+Kwargs
+    ``n_agents`` (4), ``collisions`` (True), ``world_spawning_x`` (1),
+    ``world_spawning_y`` (1), ``enforce_bounds`` (False),
+    ``agents_with_same_goal`` (1), ``split_goals`` (False),
+    ``observe_all_goals`` (False), ``lidar_range`` (0.35), ``agent_radius``
+    (0.1), ``comms_range`` (0; only drawn: lines between agents this close),
+    ``n_lidar_rays`` (12), ``shared_rew`` (True), ``pos_shaping_factor`` (1),
+    ``final_reward`` (0.01), ``agent_collision_penalty`` (-1).
+Deviations from VMAS 1.5
+    Inconsistent kwargs raise ValueError instead of failing an assert. Agents
+    past the seventh get fixed colours spread round the hue circle (VMAS draws
+    them from ``torch.randn`` at construction, which also shifts the global
+    RNG stream). Rewards, observations, dones and infos are otherwise VMAS's.
+"""
+from __future__ import annotations
+
+import colorsys
+
+import torch
+from torch import Tensor
+
+from vmas_ros.scenarios.common import for_index as shaped_for
+from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
+from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.lidar_batch import AgentLidars
+from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.sensors import Lidar
+from vmas_ros.simulator.utils import Color, ScenarioUtils, TorchUtils
+
+#: name -> default of every kwarg (the heuristic reads the ones that shape the observation)
+DEFAULTS = {
+    "n_agents": 4, "collisions": True, "world_spawning_x": 1, "world_spawning_y": 1, "enforce_bounds": False,
+    "agents_with_same_goal": 1, "split_goals": False, "observe_all_goals": False, "lidar_range": 0.35,
+    "agent_radius": 0.1, "comms_range": 0, "n_lidar_rays": 12, "shared_rew": True, "pos_shaping_factor": 1,
+    "final_reward": 0.01, "agent_collision_penalty": -1,
+}
+GOAL_RADIUS = 0.05  # the goal marks' radius (the engine's default disc): "on goal" for the final reward
+SPAWN_CLEARANCE = 0.05  # extra gap between any two spawned entities, beyond two agent radii
+TOUCH_DISTANCE = 0.005  # surfaces closer than this count as a collision in the reward
+SUBSTEPS = 2
+#: the first seven agents' colours (the paper's figures)
+PALETTE = (
+    (0.22, 0.49, 0.72), (1.00, 0.50, 0.0), (0.30, 0.69, 0.29), (0.97, 0.51, 0.75),
+    (0.60, 0.31, 0.64), (0.89, 0.10, 0.11), (0.87, 0.87, 0.0),
+)
+
+
+def agent_color(i: int) -> tuple:
+    """Agent ``i``'s colour: the palette, then hues spaced by the golden angle (distinct, deterministic)."""
+    if i < len(PALETTE):
+        return PALETTE[i]
+    return colorsys.hsv_to_rgb(((i - len(PALETTE)) * 0.618034) % 1.0, 0.7, 0.85)
+
+
+def is_agent(entity) -> bool:
+    """The lidar's filter: it sees the other agents only (goals do not collide)."""
+    return isinstance(entity, Agent)
+
+
+is_agent.layout_static = True  # depends on the entity's type only: the world may cache the targets
+
+
+def goal_slots(n_agents: int, agents_with_same_goal: int, split_goals: bool) -> list[int]:
+    """For every agent, which of the ``n_agents`` goal draws it goes to.
+
+    ``split_goals``: the first half shares draw 0, the second half draw 1.
+    Otherwise the first ``agents_with_same_goal`` agents share draw 0 and
+    every later agent ``i`` has draw ``i`` to itself.
+    """
+    if split_goals:
+        return [i // agents_with_same_goal for i in range(n_agents)]
+    return [0 if i < agents_with_same_goal else i for i in range(n_agents)]
+
+
+def validate(config: dict) -> None:
+    """Raise ValueError for a kwarg value (or combination) the task cannot be built with."""
+    def whole(name: str, low: int) -> None:
+        value = config[name]
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ValueError(f"navigation: {name} must be an int >= {low}, got {value!r}")
+
+    def number(name: str, positive: bool) -> None:
+        value = config[name]
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and (value > 0 if positive else value >= 0)
+        if not ok:
+            raise ValueError(f"navigation: {name} must be a number {'> 0' if positive else '>= 0'}, got {value!r}")
+
+    whole("n_agents", 1)
+    whole("n_lidar_rays", 1)
+    for name in ("world_spawning_x", "world_spawning_y", "lidar_range", "agent_radius"):
+        number(name, positive=True)
+    number("comms_range", positive=False)
+    for name in ("pos_shaping_factor", "final_reward", "agent_collision_penalty"):
+        if isinstance(config[name], bool) or not isinstance(config[name], (int, float)):
+            raise ValueError(f"navigation: {name} must be a number, got {config[name]!r}")
+    n, same = config["n_agents"], config["agents_with_same_goal"]
+    if isinstance(same, bool) or not isinstance(same, int) or not 1 <= same <= n:
+        raise ValueError(f"navigation: agents_with_same_goal must be an int in [1, n_agents={n}], got {same!r}")
+    if same > 1 and config["collisions"]:
+        raise ValueError(
+            f"navigation: agents_with_same_goal={same} needs collisions=False (agents sharing a goal cannot collide)"
+        )
+    if config["split_goals"] and (n % 2 or same != n // 2):
+        raise ValueError(
+            f"navigation: split_goals needs an even n_agents and agents_with_same_goal = n_agents / 2, "
+            f"got n_agents={n}, agents_with_same_goal={same}"
+        )
+
+
+class Scenario(BaseScenario):
+    supports_batched_reset = True
+    fresh_observations = True
+
+    def make_world(self, batch_dim: int, device, **kwargs) -> World:
+        config = read_kwargs(kwargs, DEFAULTS)
+        validate(config)
+        for name, value in config.items():
+            setattr(self, name, value)
+        self.plot_grid = False
+        self.spawn_distance = 2 * self.agent_radius + SPAWN_CLEARANCE
+        bounds = (self.world_spawning_x, self.world_spawning_y) if self.enforce_bounds else (None, None)
+
+        world = World(batch_dim, device, substeps=SUBSTEPS, x_semidim=bounds[0], y_semidim=bounds[1])
+        for i in range(self.n_agents):
+            color = agent_color(i)
+            sensors = None
+            if self.collisions:
+                sensors = [Lidar(world, n_rays=self.n_lidar_rays, max_range=self.lidar_range, entity_filter=is_agent)]
+            agent = Agent(
+                name=f"agent_{i}", collide=self.collisions, color=color, shape=Sphere(radius=self.agent_radius),
+                render_action=True, sensors=sensors,
+            )
+            goal = Landmark(name=f"goal {i}", collide=False, color=color, shape=Sphere(radius=GOAL_RADIUS))
+            agent.goal = goal
+            world.add_agent(agent)
+            world.add_landmark(goal)
+
+        self._slots = torch.tensor(
+            goal_slots(self.n_agents, self.agents_with_same_goal, self.split_goals), device=world.device
+        )
+        self._index = {agent.name: i for i, agent in enumerate(world.agents)}
+        self._lidars = AgentLidars(world, world.agents) if self.collisions else None
+        #: [n, n] bool: pairs of distinct agents
+        self._others = ~torch.eye(self.n_agents, dtype=torch.bool, device=world.device)
+        #: per env [B, n]: each agent's distance to its goal x pos_shaping_factor, as of the last reward
+        self.pos_shaping = torch.zeros(batch_dim, self.n_agents, device=world.device)
+        #: the last reward's terms: per agent [B, n] (shaping, collisions), per env [B] (team shaping, final)
+        self.agent_pos_rew = torch.zeros(batch_dim, self.n_agents, device=world.device)
+        self.agent_collision_rew = torch.zeros(batch_dim, self.n_agents, device=world.device)
+        self.pos_rew = torch.zeros(batch_dim, device=world.device)
+        self.final_rew = torch.zeros(batch_dim, device=world.device)
+        return world
+
+    # ------------------------------------------------------------------- reset
+    def reset_world_at(self, env_index=None) -> None:
+        world = self.world
+        rows = selected_rows(world.batch_dim, env_index)
+        x_bounds = (-self.world_spawning_x, self.world_spawning_x)
+        y_bounds = (-self.world_spawning_y, self.world_spawning_y)
+        # agents first, then one goal draw per agent, each clear of all drawn before it: [rows, 2n, 2]
+        placed = torch.zeros(rows, 0, world.dim_p, device=world.device)
+        for _ in range(2 * self.n_agents):
+            point = ScenarioUtils.find_random_pos_for_entity(
+                placed, env_index, world, self.spawn_distance, x_bounds, y_bounds
+            )
+            placed = torch.cat([placed, point], dim=1)
+        agents, goals = placed[:, : self.n_agents], placed[:, self.n_agents :][:, self._slots]
+        for i, agent in enumerate(world.agents):
+            agent.set_pos(shaped_for(agents[:, i], env_index), batch_index=env_index)
+            agent.goal.set_pos(shaped_for(goals[:, i], env_index), batch_index=env_index)
+        shaping = torch.linalg.vector_norm(agents - goals, dim=-1) * self.pos_shaping_factor
+        if env_index is None:
+            self.pos_shaping = shaping
+        else:
+            self.pos_shaping[env_index] = shaped_for(shaping, env_index)
+
+    # ------------------------------------------------------------------ reward
+    def _positions(self) -> tuple[Tensor, Tensor]:
+        """Agents' and their goals' positions, each [B, n, 2]."""
+        agents = torch.stack([a.state.pos for a in self.world.agents], dim=1)
+        goals = torch.stack([a.goal.state.pos for a in self.world.agents], dim=1)
+        return agents, goals
+
+    def _collision_counts(self, pos: Tensor) -> Tensor:
+        """How many other agents each agent touches (surfaces within TOUCH_DISTANCE): [B, n].
+
+        A pair counts only if its centres are within two radii in some env of
+        the batch (VMAS's ``World.collides``, a batch-wide test), computed here
+        as a tensor reduction so that no value is read back to the host.
+        """
+        centres = torch.linalg.vector_norm(pos.unsqueeze(2) - pos.unsqueeze(1), dim=-1)  # [B, n, n]
+        reach = 2 * self.agent_radius
+        in_play = (centres <= reach).any(dim=0, keepdim=True) & self._others  # [1, n, n]
+        touching = centres - reach <= TOUCH_DISTANCE
+        return (touching & in_play).sum(dim=-1)
+
+    def _all_rewards(self) -> Tensor:
+        """Every agent's reward [B, n]; caches the terms ``info`` reports."""
+        pos, goals = self._positions()
+        distance = torch.linalg.vector_norm(pos - goals, dim=-1)  # [B, n]
+        shaping = distance * self.pos_shaping_factor
+        self.agent_pos_rew = self.pos_shaping - shaping
+        self.pos_shaping = shaping
+        self.pos_rew = self.agent_pos_rew.sum(dim=1)
+        all_on_goal = (distance < GOAL_RADIUS).all(dim=1)
+        self.final_rew = torch.where(all_on_goal, float(self.final_reward), 0.0)
+        if self.collisions:
+            self.agent_collision_rew = self._collision_counts(pos) * float(self.agent_collision_penalty)
+        else:
+            self.agent_collision_rew = torch.zeros_like(distance)
+        shaping_rew = self.pos_rew.unsqueeze(1) if self.shared_rew else self.agent_pos_rew
+        return shaping_rew + self.final_rew.unsqueeze(1) + self.agent_collision_rew
+
+    def reward(self, agent: Agent) -> Tensor:
+        if agent is self.world.agents[0]:
+            self._rewards = self._all_rewards()
+        return self._rewards[:, self._index[agent.name]]
+
+    # ------------------------------------------------------------- observation
+    def observation(self, agent: Agent) -> Tensor:
+        if self.observe_all_goals:
+            to_goals = [agent.state.pos - other.goal.state.pos for other in self.world.agents]
+        else:
+            to_goals = [agent.state.pos - agent.goal.state.pos]
+        parts = [agent.state.pos, agent.state.vel, *to_goals]
+        if self.collisions:
+            parts.append(self.lidar_range - self._lidars.reading(agent))
+        return torch.cat(parts, dim=-1)
+
+    def info(self, agent: Agent) -> dict:
+        i = self._index[agent.name]
+        return {
+            "pos_rew": self.pos_rew if self.shared_rew else self.agent_pos_rew[:, i],
+            "final_rew": self.final_rew,
+            "agent_collisions": self.agent_collision_rew[:, i],
+        }
+
+    def done(self) -> Tensor:
+        pos, goals = self._positions()
+        return (torch.linalg.vector_norm(pos - goals, dim=-1) < self.agent_radius).all(dim=1)
+
+    def extra_render(self, env_index: int = 0) -> list:
+        """Black lines between agents within ``comms_range`` of each other."""
+        from vmas_ros.simulator import rendering
+
+        pos = torch.stack([a.state.pos[env_index] for a in self.world.agents])  # [n, 2]
+        close = (torch.cdist(pos, pos) <= self.comms_range).triu(diagonal=1)
+        geoms = []
+        for i, j in close.nonzero().tolist():
+            line = rendering.Line(tuple(pos[i].tolist()), tuple(pos[j].tolist()), width=1)
+            line.set_color(*Color.BLACK.value)
+            geoms.append(line)
+        return geoms
+
+
+class HeuristicPolicy(BaseHeuristicPolicy):
+    """Drive to the goal with a PD law; steer off neighbours the lidar sees.
+
+    VMAS's heuristic solves a CLF-QP per step with cvxpy/cvxpylayers; this one
+    is a closed-form controller instead, batched over envs, with no solver
+    dependency and no per-step optimisation: for a point mass with box-bounded
+    force a saturated PD law already gives the exponential convergence the
+    CLF asks for.
+
+    From the observation only: the goal is ``pos - obs[4:6]`` (the own-goal
+    block, ``goal_slot`` of them with ``observe_all_goals``). The wanted
+    velocity points at the goal (``gain`` x distance, at most ``max_speed``).
+    With ``collisions`` each lidar proximity ``p_k`` (0 = free, up to
+    ``lidar_range`` = touching) pushes the wanted velocity away from ray
+    ``k`` and a little sideways (``swerve``, always to the same hand, so two
+    agents meeting head-on pass each other instead of stalling). The force
+    is a velocity loop on the wanted velocity, clipped to the action range.
+    """
+
+    gain = 1.5
+    max_speed = 0.8
+    velocity_gain = 4.0
+    repulsion = 3.0
+    swerve = 0.6
+
+    def __init__(self, continuous_action: bool = True, goal_slot: int = 0, **scenario_kwargs) -> None:
+        super().__init__(continuous_action)
+        cfg = heuristic_kwargs("navigation", DEFAULTS, scenario_kwargs)
+        n_goals = cfg["n_agents"] if cfg["observe_all_goals"] else 1
+        if isinstance(goal_slot, bool) or not isinstance(goal_slot, int) or not 0 <= goal_slot < n_goals:
+            raise ValueError(f"navigation heuristic: goal_slot must be an int in [0, {n_goals}), got {goal_slot!r}")
+        self.goal_start = 4 + 2 * goal_slot
+        self.n_rays = cfg["n_lidar_rays"] if cfg["collisions"] else 0
+        self.lidar_range = float(cfg["lidar_range"])
+        self.width = 4 + 2 * n_goals + self.n_rays
+        angles = 2 * torch.pi * torch.arange(self.n_rays, dtype=torch.float32) / max(self.n_rays, 1)
+        self._rays = torch.stack([torch.cos(angles), torch.sin(angles)], dim=-1)  # [R, 2] unit ray directions
+
+    def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
+        if observation.shape[1] != self.width:
+            raise ValueError(
+                f"navigation heuristic: expected observation width {self.width}, got {observation.shape[1]}"
+            )
+        vel = observation[:, 2:4]
+        to_goal = -observation[:, self.goal_start : self.goal_start + 2]
+        wanted = TorchUtils.clamp_with_norm(self.gain * to_goal, self.max_speed)
+        if self.n_rays:
+            rays = self._rays.to(observation.device, observation.dtype)
+            closeness = observation[:, -self.n_rays :] / self.lidar_range  # [B, R], 1 = touching
+            towards = closeness @ rays  # [B, 2]: where the neighbours are, weighted by closeness
+            sideways = torch.stack([towards[:, 1], -towards[:, 0]], dim=-1)
+            wanted = wanted - self.repulsion * towards + self.swerve * self.repulsion * sideways
+            wanted = TorchUtils.clamp_with_norm(wanted, self.max_speed)
+        force = self.velocity_gain * (wanted - vel)
+        return force.clamp(-u_range, u_range)
