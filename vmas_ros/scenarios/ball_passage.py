@@ -1,0 +1,320 @@
+"""ball_passage: two agents push a ball through a gap in a barrier to a goal beyond it.
+
+Description
+    Two agents (discs of radius 0.0333, mass 2, drag 0.25, ``u_multiplier``
+    0.7) and a free ball (disc of the same radius, mass 1, linear friction
+    0.02) start below a barrier along y = 0, inside walls at +-1 (the world
+    has no drag or friction of its own). The barrier is a row of 20 red
+    blocks (0.103 wide along x, 0.2 tall); ``n_passages`` of them are missing,
+    which leaves gaps just wide enough for the ball. The agents must push the
+    ball through a gap and onto a green goal above the barrier. Blocks collide
+    with agents and ball but not with each other.
+Observation (per agent, in this order)
+    own position (2), own velocity (2), own position minus the goal's (2),
+    own position minus the ball's (2), and own position minus every gap's
+    (2 x ``n_passages``, gaps in block order).
+Reward
+    Shared by both agents. While the ball is below y = 0: the decrease of its
+    distance to the nearest gap; once above: the decrease of its distance to
+    the goal (both distances are tracked every step). Plus -0.06 for every
+    (agent or ball, solid block) pair that overlaps. ``info`` reports
+    ``pos_rew`` and ``collision_rew``.
+Starting state
+    The ball uniform below the barrier, agents 0.25 either side of it along a
+    direction at an angle uniform in [-pi/2, pi/2] (-pi/2 without
+    ``random_start_angle``: agent 0 straight above the ball), all three at
+    least one radius inside the walls and below the barrier; goal uniform
+    above it. Blocks are shuffled along the barrier unless ``fixed_passage``
+    (then the gaps are the middle blocks, at x around 0). VMAS 1.5 draws one
+    shuffle per reset call (shared by the whole batch on a full reset); here
+    every env draws its own.
+Episode termination
+    When the ball is within 0.01 of the goal or touches a wall (its centre
+    within one radius of +-1).
+Kwargs
+    ``n_passages`` (1, from 1 to 20), ``fixed_passage`` (False),
+    ``random_start_angle`` (True).
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from vmas_ros.scenarios.common import for_index as shaped_for
+from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.passage import random_permutations
+from vmas_ros.simulator import geometry as geo
+from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
+from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.utils import LINE_MIN_DIST, Color, TorchUtils
+
+DEFAULTS = {"n_passages": 1, "fixed_passage": False, "random_start_angle": True}
+N_AGENTS = 2
+RADIUS = 0.03333  # agents and ball
+SPACING = 0.5  # agent to agent at the start, the ball halfway
+BLOCK_LENGTH = 0.103  # along x: also the width of a gap
+BLOCK_WIDTH = 0.2  # along y: the barrier's thickness
+SEMIDIM = 1.0
+N_BLOCKS = int((2 * SEMIDIM + 2 * RADIUS) // BLOCK_LENGTH)
+COLLISION_PENALTY = 0.06
+GOAL_DISTANCE = 0.01
+
+
+def validate(config: dict) -> None:
+    """Raise ValueError for a kwarg value the task cannot be built with."""
+    n = config["n_passages"]
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= N_BLOCKS:
+        raise ValueError(f"ball_passage: n_passages must be an int in [1, {N_BLOCKS}], got {n!r}")
+    for name in ("fixed_passage", "random_start_angle"):
+        if not isinstance(config[name], bool):
+            raise ValueError(f"ball_passage: {name} must be a bool, got {config[name]!r}")
+
+
+def gap_indices(n_passages: int) -> list:
+    """The blocks left out of the barrier: the ``n_passages`` in the middle of the row (VMAS 1.5's)."""
+    middle = N_BLOCKS // 2
+    return [i for i in range(N_BLOCKS) if middle - n_passages / 2 <= i < middle + n_passages / 2]
+
+
+def disc_box_overlaps(discs: Tensor, radius: float, boxes: Tensor, box_rot: Tensor) -> Tensor:
+    """Which discs overlap which barrier blocks, as ``World.is_overlapping`` judges one pair.
+
+    ``discs`` [B, n, 2], ``boxes`` [B, K, 2], ``box_rot`` [B, K] -> [B, n, K] bool:
+    the disc touches the block's outline, or its centre is inside the block.
+    """
+    point, centre, rot = discs.unsqueeze(2), boxes.unsqueeze(1), box_rot.unsqueeze(1)
+    closest = geo.closest_point_on_box_boundary(centre, rot, BLOCK_LENGTH, BLOCK_WIDTH, point)
+    inside = torch.linalg.vector_norm(point - centre, dim=-1) < torch.linalg.vector_norm(centre - closest, dim=-1)
+    touching = torch.linalg.vector_norm(point - closest, dim=-1) < radius + LINE_MIN_DIST
+    return inside | touching
+
+
+class Scenario(BaseScenario):
+    supports_batched_reset = True
+    fresh_observations = True
+
+    def make_world(self, batch_dim: int, device, **kwargs) -> World:
+        config = read_kwargs(kwargs, DEFAULTS)
+        validate(config)
+        self.n_passages = config["n_passages"]
+        self.fixed_passage = config["fixed_passage"]
+        self.random_start_angle = config["random_start_angle"]
+        self.visualize_semidims = False  # extra_render draws the walls
+
+        world = World(batch_dim, device, x_semidim=SEMIDIM, y_semidim=SEMIDIM, drag=0.0, linear_friction=0.0)
+        for i in range(N_AGENTS):
+            world.add_agent(Agent(name=f"agent_{i}", shape=Sphere(RADIUS), u_multiplier=0.7, mass=2.0, drag=0.25))
+        self.goal = Landmark(name="goal", shape=Sphere(radius=RADIUS), collide=False, color=Color.GREEN)
+        world.add_landmark(self.goal)
+        self.ball = Landmark(
+            name="ball", shape=Sphere(radius=RADIUS), collide=True, movable=True, mass=1.0,
+            color=Color.BLACK, linear_friction=0.02,
+        )
+        world.add_landmark(self.ball)
+        gaps = set(gap_indices(self.n_passages))
+        self.blocks = [
+            Landmark(
+                name=f"passage {i}", collide=i not in gaps, movable=False,
+                shape=Box(length=BLOCK_LENGTH, width=BLOCK_WIDTH), color=Color.RED,
+                collision_filter=lambda e: e.shape.kind != "box",
+            )
+            for i in range(N_BLOCKS)
+        ]
+        for block in self.blocks:
+            world.add_landmark(block)
+        self.gaps = [b for b in self.blocks if not b.collide]
+        self.solid = [b for b in self.blocks if b.collide]
+        for gap in self.gaps:
+            gap.is_rendering[:] = False
+        first_slot_x = -SEMIDIM - RADIUS + BLOCK_LENGTH / 2
+        self._slot_x = first_slot_x + BLOCK_LENGTH * torch.arange(N_BLOCKS, device=world.device, dtype=torch.float32)
+
+        #: per env [B]: the ball's distance to the nearest gap / to the goal, as of the last reward
+        self.pre_shaping = torch.zeros(batch_dim, device=world.device)
+        self.post_shaping = torch.zeros(batch_dim, device=world.device)
+        self.pos_rew = torch.zeros(batch_dim, device=world.device)
+        self.collision_rew = torch.zeros(batch_dim, device=world.device)
+        return world
+
+    # ------------------------------------------------------------------- reset
+    def reset_world_at(self, env_index=None) -> None:
+        world, device = self.world, self.world.device
+        rows = selected_rows(world.batch_dim, env_index)
+
+        def uniform(low, high) -> Tensor:
+            return low + (high - low) * torch.rand(rows, 1, device=device)
+
+        if self.random_start_angle:
+            angle = torch.empty(rows, 1, device=device).uniform_(-math.pi / 2, math.pi / 2)
+        else:
+            angle = torch.full((rows, 1), -math.pi / 2, device=device)
+        half = (SPACING / 2) * torch.cat([torch.cos(angle), torch.sin(angle)], dim=1)  # ball -> agent 1
+        # the ball's range keeps both agents inside the walls and below the barrier
+        x_room = SEMIDIM - RADIUS - half[:, :1].abs()
+        y_low = -SEMIDIM + RADIUS + half[:, 1:].abs()
+        y_high = -2 * RADIUS - BLOCK_WIDTH / 2 - half[:, 1:].abs()
+        ball = torch.cat([uniform(-x_room, x_room), uniform(y_low, y_high)], dim=1)
+        goal = torch.cat([
+            uniform(-SEMIDIM + RADIUS, SEMIDIM - RADIUS), uniform(2 * RADIUS + BLOCK_WIDTH / 2, SEMIDIM - RADIUS),
+        ], dim=1)
+        self.ball.set_pos(shaped_for(ball, env_index), batch_index=env_index)
+        for i, agent in enumerate(world.agents):
+            agent.set_pos(shaped_for(ball + (half if i == 1 else -half), env_index), batch_index=env_index)
+        self.goal.set_pos(shaped_for(goal, env_index), batch_index=env_index)
+
+        slots = torch.arange(N_BLOCKS, device=device).expand(rows, -1)
+        order = slots if self.fixed_passage else random_permutations(rows, N_BLOCKS, device)
+        block_x = self._slot_x[order]  # [rows, blocks]: block k's x
+        block_pos = torch.stack([block_x, torch.zeros_like(block_x)], dim=-1)
+        for k, block in enumerate(self.blocks):
+            block.set_pos(shaped_for(block_pos[:, k], env_index), batch_index=env_index)
+
+        gaps = torch.stack([block_pos[:, k] for k, b in enumerate(self.blocks) if not b.collide], dim=1)
+        pre = torch.linalg.vector_norm(ball.unsqueeze(1) - gaps, dim=-1).min(dim=1).values
+        post = torch.linalg.vector_norm(ball - goal, dim=-1)
+        if env_index is None:
+            self.pre_shaping, self.post_shaping = pre, post
+        else:
+            self.pre_shaping[env_index] = shaped_for(pre, env_index)
+            self.post_shaping[env_index] = shaped_for(post, env_index)
+
+    # ------------------------------------------------------------------ reward
+    def _positions(self, entities: list) -> Tensor:
+        return torch.stack([e.state.pos for e in entities], dim=1)  # [B, n, 2]
+
+    def reward(self, agent: Agent) -> Tensor:
+        if agent is self.world.agents[0]:  # shared: compute once per step
+            ball = self.ball.state.pos
+            pre = torch.linalg.vector_norm(ball.unsqueeze(1) - self._positions(self.gaps), dim=-1).min(dim=1).values
+            post = torch.linalg.vector_norm(ball - self.goal.state.pos, dim=-1)
+            passed = ball[:, 1] > 0
+            self.pos_rew = torch.where(passed, self.post_shaping - post, self.pre_shaping - pre)
+            self.pre_shaping, self.post_shaping = pre, post
+
+            discs = self._positions([*self.world.agents, self.ball])
+            rot = torch.stack([b.state.rot[:, 0] for b in self.solid], dim=1)
+            overlaps = disc_box_overlaps(discs, RADIUS, self._positions(self.solid), rot)
+            self.collision_rew = -COLLISION_PENALTY * overlaps.sum(dim=(1, 2)).float()
+        return self.pos_rew + self.collision_rew
+
+    # ------------------------------------------------------------- observation
+    def observation(self, agent: Agent) -> Tensor:
+        pos = agent.state.pos
+        gaps = pos.unsqueeze(1) - self._positions(self.gaps)
+        return torch.cat([
+            pos, agent.state.vel, pos - self.goal.state.pos, pos - self.ball.state.pos, gaps.flatten(1),
+        ], dim=-1)
+
+    def info(self, agent: Agent) -> dict:
+        return {"pos_rew": self.pos_rew, "collision_rew": self.collision_rew}
+
+    def done(self) -> Tensor:
+        ball = self.ball.state.pos
+        arrived = torch.linalg.vector_norm(ball - self.goal.state.pos, dim=-1) <= GOAL_DISTANCE
+        at_wall = (ball.abs() >= SEMIDIM - RADIUS).any(dim=-1)
+        return arrived | at_wall
+
+    def extra_render(self, env_index: int = 0) -> list:
+        from vmas_ros.simulator import rendering
+
+        edge = SEMIDIM + RADIUS
+        walls = rendering.make_polygon([(-edge, -edge), (edge, -edge), (edge, edge), (-edge, edge)], filled=False)
+        walls.set_color(*Color.BLACK.value)
+        return [walls]
+
+
+class HeuristicPolicy(BaseHeuristicPolicy):
+    """Dribble the ball: circle round it to its far side, then push it to the gap, then the goal.
+
+    Each agent reads the ball, the goal and the gaps from its observation. The
+    ball's target is a point below the nearest gap while it is low and off
+    the gap's axis, the gap's far side once lined up (or level with the
+    barrier), and the goal once above it. An agent's place is straight behind
+    the ball as seen from that target (``side_angle`` can turn it sideways).
+    While the agent is more than ``behind_angle`` off its place it orbits
+    the ball (tangential speed ``orbit_speed`` the short way round, holding
+    ``orbit_radius``) instead of driving through it; once there it drives at
+    the contact point and on along the push direction, slowing near the
+    target since the ball keeps its speed. The gap takes one at a time: near
+    the barrier the agent not in contact waits below, and once the ball is
+    through, an agent still below heads for the gap itself. The wanted
+    velocity becomes a force through a feed-forward against the drag plus a
+    proportional term. Continuous actions only.
+
+    It brings the ball much closer than random play, but agents still jam
+    against the barrier's blocks near the gap, and those penalties can eat
+    the gain in total return.
+    """
+
+    push_speed = 0.2
+    max_speed = 0.5
+    orbit_speed = 0.3
+    orbit_radius = 3 * RADIUS
+    behind_angle = 0.4
+    gain = 3.0
+    side_angle = 0.0  # rad off the push line, towards the agent's own side
+    feedforward = 5.0  # force per unit of held speed: drag 0.25 per 0.1 s step, mass 2
+    feedback = 4.0
+    u_multiplier = 0.7
+
+    def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
+        super().__init__(continuous_action)
+        if not continuous_action:
+            raise ValueError("ball_passage heuristic: only continuous actions are supported")
+        config = heuristic_kwargs("ball_passage", DEFAULTS, scenario_kwargs)
+        validate(config)
+        self.n_passages = config["n_passages"]
+
+    def _ball_target(self, ball: Tensor, goal: Tensor, gaps: Tensor) -> Tensor:
+        """Where the ball should go next: [b, 2]."""
+        rows = torch.arange(gaps.shape[0], device=gaps.device)
+        gap = gaps[rows, torch.linalg.vector_norm(gaps - ball.unsqueeze(1), dim=-1).argmin(dim=1)]
+        below = gap + torch.tensor([0.0, -BLOCK_WIDTH / 2 - 4 * RADIUS], device=gap.device)
+        beyond = gap + torch.tensor([0.0, BLOCK_WIDTH / 2 + 3 * RADIUS], device=gap.device)
+        lined_up = (ball[:, 0] - gap[:, 0]).abs() < 0.015
+        low = (ball[:, 1] < below[:, 1] + 2 * RADIUS) & ~lined_up
+        passing = ball[:, 1] <= BLOCK_WIDTH / 2 + RADIUS
+        return torch.where(low.unsqueeze(-1), below, torch.where(passing.unsqueeze(-1), beyond, goal))
+
+    def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
+        width = 8 + 2 * self.n_passages
+        if observation.shape[1] != width:
+            raise ValueError(f"ball_passage heuristic: expected observation width {width}, got {observation.shape[1]}")
+        pos, vel = observation[:, 0:2], observation[:, 2:4]
+        goal, ball = pos - observation[:, 4:6], pos - observation[:, 6:8]
+        gaps = pos.unsqueeze(1) - observation[:, 8:].view(-1, self.n_passages, 2)
+        push = self._ball_target(ball, goal, gaps) - ball
+        push_dir = push / torch.linalg.vector_norm(push, dim=-1, keepdim=True).clamp_min(1e-6)
+        across = torch.stack([-push_dir[:, 1], push_dir[:, 0]], dim=-1)
+
+        rel = observation[:, 6:8]  # agent relative to the ball
+        dist = torch.linalg.vector_norm(rel, dim=-1, keepdim=True).clamp_min(1e-6)
+        radial = rel / dist
+        side = torch.where((rel * across).sum(-1, keepdim=True) < 0, -1.0, 1.0)
+        near_barrier = (ball[:, 1:] > -BLOCK_WIDTH / 2 - 4 * RADIUS) & (ball[:, 1:] < BLOCK_WIDTH / 2 + 2 * RADIUS)
+        angle = torch.where(near_barrier, 0.0, self.side_angle)
+        place = -push_dir * torch.cos(angle) + side * across * torch.sin(angle)  # unit, from the ball
+
+        # signed angle from the agent's bearing to its place, about the ball
+        error = torch.atan2(radial[:, 0] * place[:, 1] - radial[:, 1] * place[:, 0], (radial * place).sum(-1))
+        tangent = torch.stack([-radial[:, 1], radial[:, 0]], dim=-1)  # counter-clockwise about the ball
+        orbit = self.orbit_speed * torch.sign(error).unsqueeze(-1) * tangent
+        orbit = orbit + self.gain * (self.orbit_radius - dist) * radial
+        contact = ball + place * (2 * RADIUS)
+        # slow down near the target: the ball keeps its speed once pushed
+        pace = self.push_speed * (torch.linalg.vector_norm(push, dim=-1, keepdim=True) / 0.3).clamp(0.2, 1.0)
+        dribble = self.gain * (contact - pos) + pace * push_dir
+        placed = (error.abs() < self.behind_angle).unsqueeze(-1)
+        wanted = torch.where(placed, dribble, orbit)
+        # the ball passes the gap with one pusher: the other waits below, then takes the gap itself
+        waiting = near_barrier & (dist > 3 * RADIUS) & (pos[:, 1:] < ball[:, 1:])
+        wanted = torch.where(waiting, torch.zeros_like(wanted), wanted)
+        left_behind = (pos[:, 1:] < 0) & (ball[:, 1:] > 0) & ~waiting
+        own_way = self.gain * (self._ball_target(pos, goal, gaps) - pos)
+        wanted = torch.where(left_behind, own_way, wanted)
+        wanted = TorchUtils.clamp_with_norm(wanted, self.max_speed)
+        force = self.feedforward * wanted + self.feedback * (wanted - vel)
+        return (force / self.u_multiplier).clamp(-u_range, u_range)
