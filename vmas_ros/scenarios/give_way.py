@@ -113,6 +113,27 @@ def map_layout(mirror_passage: bool) -> list[Wall]:
     return walls
 
 
+def track_velocity(agent: Agent, command: Tensor, max_speed: float, min_input_norm: float) -> None:
+    """Turn a desired velocity ``command`` [B, 2] into ``agent.action.u`` through its PID controller.
+
+    The command is clipped to a disc of radius ``max_speed`` and zeroed below
+    ``min_input_norm``; it is kept as ``agent.vel_action``. Shared with
+    ``multi_give_way``, whose robots are driven the same way.
+    """
+    command = TorchUtils.clamp_with_norm(command, max_speed)
+    small = torch.linalg.vector_norm(command, dim=-1, keepdim=True) < min_input_norm
+    command = torch.where(small, 0.0, command)
+    agent.action.u = command
+    agent.vel_action = command.clone()
+    # a zero command starts a fresh PID episode: no integral carried over from the last move
+    # (the controller's reset(mask), done with torch.where so that a GPU never syncs here)
+    controller = agent.controller
+    stopped = (torch.linalg.vector_norm(command, dim=-1) < 1e-3).unsqueeze(-1)
+    controller.accum_errs = torch.where(stopped, 0.0, controller.accum_errs)
+    controller.prev_err = torch.where(stopped, 0.0, controller.prev_err)
+    controller.process_force()
+
+
 class Scenario(BaseScenario):
     supports_batched_reset = True
 
@@ -212,18 +233,7 @@ class Scenario(BaseScenario):
             i = self._index[agent.name]
             line = torch.cat([self._delay_line[:, i], command.unsqueeze(1)], dim=1)
             command, self._delay_line[:, i] = line[:, 0], line[:, 1:]
-        command = TorchUtils.clamp_with_norm(command, self.u_range)
-        small = torch.linalg.vector_norm(command, dim=-1, keepdim=True) < self.min_input_norm
-        command = torch.where(small, 0.0, command)
-        agent.action.u = command
-        agent.vel_action = command.clone()
-        # a zero command starts a fresh PID episode: no integral carried over from the last move
-        # (the controller's reset(mask), done with torch.where so that a GPU never syncs here)
-        controller = agent.controller
-        stopped = (torch.linalg.vector_norm(command, dim=-1) < 1e-3).unsqueeze(-1)
-        controller.accum_errs = torch.where(stopped, 0.0, controller.accum_errs)
-        controller.prev_err = torch.where(stopped, 0.0, controller.prev_err)
-        controller.process_force()
+        track_velocity(agent, command, self.u_range, self.min_input_norm)
 
     # ------------------------------------------------------------------ reward
     def _stack(self, field: str) -> Tensor:
