@@ -1,0 +1,1 @@
+"""VMAS's debug scenarios: small worlds that exercise one engine feature each."""
