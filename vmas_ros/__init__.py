@@ -8,13 +8,14 @@ imports (see vmas_ros/ros/startup.py).
 """
 import importlib
 
-from vmas_ros.scenarios import list_scenarios  # the registry: no scenario module is imported
+from vmas_ros.scenarios import DEBUG_SCENARIOS, MAIN_SCENARIOS, MPE_SCENARIOS, list_scenarios  # no scenario imported
 
 __version__ = "0.1.0"
 
-#: scenario names, as VMAS exposes them
-scenarios = list_scenarios()
-mpe_scenarios = [name for name in scenarios if name.startswith("simple")]
+#: scenario names in VMAS's three lists (``list_scenarios()`` gives all of them)
+scenarios = list(MAIN_SCENARIOS)
+debug_scenarios = list(DEBUG_SCENARIOS)
+mpe_scenarios = list(MPE_SCENARIOS)
 
 #: subpackages reachable as attributes (``vmas_ros.envs.wrap``) without importing them first
 _SUBPACKAGES = ("bench", "envs", "policy", "record", "ros", "simulator", "train", "viz")
@@ -36,4 +37,7 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'vmas_ros' has no attribute {name!r}")
 
 
-__all__ = ["make_env", "render_interactively", "list_scenarios", "scenarios", "mpe_scenarios", "__version__"]
+__all__ = [
+    "make_env", "render_interactively", "list_scenarios", "scenarios", "debug_scenarios", "mpe_scenarios",
+    "__version__",
+]

@@ -21,20 +21,43 @@ REGISTRY: Dict[str, str] = {
     "simple_tag": "vmas_ros.scenarios.mpe.simple_tag",
     "simple_world_comm": "vmas_ros.scenarios.mpe.simple_world_comm",
     "balance": "vmas_ros.scenarios.balance",
+    "ball_passage": "vmas_ros.scenarios.ball_passage",
+    "ball_trajectory": "vmas_ros.scenarios.ball_trajectory",
+    "buzz_wire": "vmas_ros.scenarios.buzz_wire",
     "discovery": "vmas_ros.scenarios.discovery",
     "dispersion": "vmas_ros.scenarios.dispersion",
     "dropout": "vmas_ros.scenarios.dropout",
     "flocking": "vmas_ros.scenarios.flocking",
     "football": "vmas_ros.scenarios.football",
     "give_way": "vmas_ros.scenarios.give_way",
+    "joint_passage": "vmas_ros.scenarios.joint_passage",
+    "joint_passage_size": "vmas_ros.scenarios.joint_passage_size",
+    "multi_give_way": "vmas_ros.scenarios.multi_give_way",
+    "navigation": "vmas_ros.scenarios.navigation",
     "passage": "vmas_ros.scenarios.passage",
     "reverse_transport": "vmas_ros.scenarios.reverse_transport",
+    "road_traffic": "vmas_ros.scenarios.road_traffic",
+    "sampling": "vmas_ros.scenarios.sampling",
     "transport": "vmas_ros.scenarios.transport",
-    "waterfall": "vmas_ros.scenarios.waterfall",
     "wheel": "vmas_ros.scenarios.wheel",
+    "wind_flocking": "vmas_ros.scenarios.wind_flocking",
+    "asym_joint": "vmas_ros.scenarios.debug.asym_joint",
+    "circle_trajectory": "vmas_ros.scenarios.debug.circle_trajectory",
+    "diff_drive": "vmas_ros.scenarios.debug.diff_drive",
+    "drone": "vmas_ros.scenarios.debug.drone",
+    "goal": "vmas_ros.scenarios.debug.goal",
+    "het_mass": "vmas_ros.scenarios.debug.het_mass",
+    "kinematic_bicycle": "vmas_ros.scenarios.debug.kinematic_bicycle",
+    "line_trajectory": "vmas_ros.scenarios.debug.line_trajectory",
+    "pollock": "vmas_ros.scenarios.debug.pollock",
+    "vel_control": "vmas_ros.scenarios.debug.vel_control",
+    "waterfall": "vmas_ros.scenarios.debug.waterfall",
 }
 
+#: VMAS's three lists: the MPE ports, the debug worlds (one engine feature each), and the rest
 MPE_SCENARIOS = sorted(name for name, path in REGISTRY.items() if ".mpe." in path)
+DEBUG_SCENARIOS = sorted(name for name, path in REGISTRY.items() if ".debug." in path)
+MAIN_SCENARIOS = sorted(set(REGISTRY) - set(MPE_SCENARIOS) - set(DEBUG_SCENARIOS))
 
 
 def list_scenarios() -> List[str]:
