@@ -89,13 +89,7 @@ def test_matches_upstream_vmas(kwargs):
         obs_up, rew_up, done_up, info_up = up.step([a.clone() for a in actions])
         obs, rew, done, info = ours.step([a.clone() for a in actions])
         parity.assert_same_state(up, ours, step)
-        for mine, theirs in zip(obs + rew, obs_up + rew_up, strict=True):
-            torch.testing.assert_close(mine, theirs, atol=parity.ATOL, rtol=0, msg=lambda m: f"step {step}: {m}")
-        assert torch.equal(done, done_up), step
-        for mine, theirs in zip(info, info_up, strict=True):
-            assert list(mine) == list(theirs)
-            for key in theirs:
-                torch.testing.assert_close(mine[key], theirs[key], atol=parity.ATOL, rtol=0)
+        parity.assert_same_outputs(step, (obs, rew, done, info), (obs_up, rew_up, done_up, info_up))
         charged = min(charged, float(info[0]["collision_rew"].min()))
         progress = max(progress, float(info[0]["pos_rew"].abs().max()))
     assert charged <= -0.06 and progress > 5e-4  # collisions charged, the ball moved

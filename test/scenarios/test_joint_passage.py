@@ -82,16 +82,7 @@ def compare_steps(up, ours, actions, steps: int) -> dict:
         obs_up, rew_up, done_up, info_up = up.step([a.clone() for a in chosen])
         obs, rew, done, info = ours.step([a.clone() for a in chosen])
         parity.assert_same_state(up, ours, step)
-        for mine, theirs in zip(obs + rew, obs_up + rew_up, strict=True):
-            torch.testing.assert_close(mine, theirs, atol=parity.ATOL, rtol=0, msg=lambda m: f"step {step}: {m}")
-        assert torch.equal(done, done_up), step
-        for mine, theirs in zip(info, info_up, strict=True):
-            assert list(mine) == list(theirs)
-            for key in theirs:
-                torch.testing.assert_close(
-                    mine[key], theirs[key], atol=parity.ATOL, rtol=0, check_dtype=key != "passed",
-                    msg=lambda m: f"step {step}, info {key}: {m}",
-                )
+        parity.assert_same_outputs(step, (obs, rew, done, info), (obs_up, rew_up, done_up, info_up))
         seen["passed"] += int(info[0]["passed"].sum())
         seen["collision"] = max(seen["collision"], float(info[0]["collision_rew"].abs().max()))
         seen["energy"] = max(seen["energy"], float(info[0]["energy_rew"].abs().max()))

@@ -13,6 +13,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
+from test.simulator import parity
 from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios import multi_give_way
 
@@ -119,10 +120,7 @@ def compare_infos(up, ours, batch: int) -> None:
     _, _, dones_up, info_up = up.step([torch.zeros(batch, 2)] * 4)
     _, _, dones, info = ours.step([torch.zeros(batch, 2)] * 4)
     assert torch.equal(dones, dones_up) and not dones.any()
-    for mine, theirs in zip(info, info_up, strict=True):
-        assert list(mine) == list(theirs)
-        for key in theirs:
-            torch.testing.assert_close(mine[key], theirs[key], atol=1e-4, rtol=0)
+    parity.assert_same_infos(info, info_up)
 
 
 def test_matches_upstream_vmas():

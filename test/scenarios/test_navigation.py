@@ -158,13 +158,7 @@ def lockstep_with_infos(up, ours, steps: int, actions) -> dict:
         obs_up, rew_up, done_up, info_up = up.step([a.clone() for a in chosen])
         obs, rew, done, info = ours.step([a.clone() for a in chosen])
         parity.assert_same_state(up, ours, step)
-        for mine, theirs in zip(obs + rew, obs_up + rew_up, strict=True):
-            torch.testing.assert_close(mine, theirs, atol=parity.ATOL, rtol=0, msg=lambda m: f"step {step}: {m}")
-        assert torch.equal(done, done_up), step
-        for mine, theirs in zip(info, info_up, strict=True):
-            assert list(mine) == list(theirs)
-            for key in theirs:
-                torch.testing.assert_close(mine[key], theirs[key], atol=parity.ATOL, rtol=0, msg=f"step {step} {key}")
+        parity.assert_same_outputs(step, (obs, rew, done, info), (obs_up, rew_up, done_up, info_up))
         seen["reward"] = max(seen["reward"], max(float(r.abs().max()) for r in rew))
         seen["penalty"] = min(seen["penalty"], min(float(i["agent_collisions"].min()) for i in info))
         seen["final"] = max(seen["final"], float(info[0]["final_rew"].max()))

@@ -16,6 +16,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
+from test.simulator import parity
 from test.simulator.parity import run_lockstep
 from vmas_ros.scenarios import road_traffic
 from vmas_ros.scenarios.road_traffic import map_data
@@ -99,10 +100,7 @@ def lockstep(options: dict, steps: int, batch: int = 2, seed: int = 0):
     _, _, done_up, info_up = up.step([a.clone() for a in actions])
     _, _, done, info = ours.step([a.clone() for a in actions])
     assert torch.equal(done, done_up)
-    for mine, theirs in zip(info, info_up, strict=True):
-        assert list(mine) == list(theirs)
-        for key in theirs:
-            torch.testing.assert_close(mine[key], theirs[key].to(mine[key].dtype), atol=1e-4, rtol=0, msg=key)
+    parity.assert_same_infos(info, info_up)
     return up, ours, seen
 
 

@@ -155,3 +155,23 @@ def run_lockstep(
         seen.fastest = max(seen.fastest, max(float(e.state.vel.norm(dim=-1).max()) for e in ours.world.entities))
         seen.reward_sums = [total + float(r.sum()) for total, r in zip(seen.reward_sums, rew_ours)]
     return seen
+
+
+def assert_same_infos(mine: Sequence[dict], theirs: Sequence[dict], where: str = "") -> None:
+    """Per agent, the same info keys in the same order and every value within ``ATOL`` (any dtype)."""
+    for i, (ours, up) in enumerate(zip(mine, theirs, strict=True)):
+        assert list(ours) == list(up), f"{where} info[{i}] keys"
+        for key in up:
+            torch.testing.assert_close(
+                ours[key].double(), up[key].double(), atol=ATOL, rtol=0, msg=lambda m: f"{where} info[{i}][{key}]: {m}",
+            )
+
+
+def assert_same_outputs(step: int, mine: tuple, theirs: tuple) -> None:
+    """One ``env.step``'s ``(obs, rews, dones, infos)`` of ours against upstream's:
+    observations and rewards within ``ATOL``, the same dones, the same infos."""
+    (obs, rews, dones, infos), (obs_up, rews_up, dones_up, infos_up) = mine, theirs
+    for ours, up in zip(obs + rews, obs_up + rews_up, strict=True):
+        torch.testing.assert_close(ours, up, atol=ATOL, rtol=0, msg=lambda m: f"step {step}: {m}")
+    assert torch.equal(dones, dones_up), f"step {step}: dones"
+    assert_same_infos(infos, infos_up, f"step {step}")
