@@ -284,7 +284,7 @@ START_CASES = {
                "num_envs must be an integer, got 'four'", "lidar_range must be > 0, got -1.0",
                "foxglove_port must be in [0, 65535] (0: off), got 70000",
                "rate_hz must be 0 (off) or in [0.001, 1e+06], got 1e-12", "seed must be in [0, 4294967295], got -1",
-               "lidar_rays must be in [1, 4096], got 100000", "unknown scenario 'nope'; valid: balance,",
+               "lidar_rays must be in [1, 4096], got 100000", "unknown scenario 'nope'; valid: asym_joint, balance,",
                "simple_spread", "is a symlink", "policy_path must end in .json or .onnx",
                "unknown parameter 'num_env' (did you mean 'num_envs'?)",
                "num_envs must be a single value, got a nested key 'num_envs.a'"],
