@@ -20,6 +20,7 @@ Per-env scenario state ([B] tensors), copied from VMAS in the parity tests:
 """
 from __future__ import annotations
 
+import abc
 import math
 
 import torch
@@ -132,42 +133,51 @@ class JointPassageBase(BaseScenario):
     CONTROLLER_KWARG = "use_controller"
 
     # --------------------------------------------------------------- hooks
+    @abc.abstractmethod
     def validate(self, config: dict) -> None:
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def world_params(self) -> dict:  # substeps, joint_force, collision_force and drag of the World
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def make_agents(self) -> list:  # the two agents, agent_0 first
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def is_gap_block(self, i: int) -> bool:
         """Whether block ``i`` (in world order) is a gap: not colliding, not drawn, observed."""
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def draw_angles(self, rows: int) -> tuple:
         """Start and goal angles of the rod, [rows, 1] each."""
-        raise NotImplementedError
+        ...
 
     def agent_order(self, rows: int) -> Tensor:
         """[rows, 1]: +1 when ``agent_1`` starts at the rod's end along the start angle, -1 when ``agent_0`` does."""
         return torch.ones(rows, 1, device=self.world.device)
 
+    @abc.abstractmethod
     def place_gaps(self, rows: int, env_index) -> Tensor:
         """Slots [rows, n_gaps] (long, distinct per row) of the gap blocks, in their order; also
         stores whatever per-env layout state the subclass keeps."""
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def shaping_terms(self) -> dict:
         """Current potentials, name -> [B]; the reward pays their decrease. Must hold ``pos_pre``
         (the rod's distance to where it should cross) and ``pos_post`` (to its goal)."""
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def rotation_reward(self, gain: dict, joint_passed: Tensor) -> Tensor:  # [B], from the potentials' gains
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def gap_observation(self, agent: Agent) -> list:  # the observed gaps relative to ``agent``, [B, 2] each
-        raise NotImplementedError
+        ...
 
     # --------------------------------------------------------------- world
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
@@ -418,12 +428,14 @@ class JointPassageHeuristic(BaseHeuristicPolicy):
         self.half = config["joint_length"] / 2
         self.width = 8 + 2 * self.n_gap_observations() + (2 if config["observe_joint_angle"] else 0)
 
+    @abc.abstractmethod
     def n_gap_observations(self) -> int:
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def gap_offset(self, to_goal: Tensor, gaps: Tensor) -> Tensor:
         """The chosen gap relative to the agent, [b, 2], from the goal [b, 2] and the observed gaps [b, n, 2]."""
-        raise NotImplementedError
+        ...
 
     def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
         if observation.shape[1] != self.width:
