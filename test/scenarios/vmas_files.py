@@ -25,7 +25,7 @@ infos; ``test_vmas_files.py`` compares the two traces.
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import importlib.machinery
 import random
 import re
 import sys
@@ -45,7 +45,7 @@ _IMPORT = re.compile(r"^(\s*)(from|import)\s+vmas\b", re.MULTILINE)
 
 def vmas_scenario_files() -> Dict[str, Path]:
     """Every scenario file the installed ``vmas`` ships, by scenario name (found without importing vmas)."""
-    spec = importlib.util.find_spec("vmas")
+    spec = importlib.machinery.PathFinder.find_spec("vmas")  # the real one, even under install_as_vmas()
     if spec is None or not spec.submodule_search_locations:
         raise RuntimeError("the vmas package is not installed: pip install vmas==1.5.2")
     root = Path(list(spec.submodule_search_locations)[0]) / "scenarios"

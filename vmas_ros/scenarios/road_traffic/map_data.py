@@ -18,7 +18,7 @@ gather the routes of many agents at once by route index.
 """
 from __future__ import annotations
 
-import importlib.util
+import importlib.machinery
 import math
 import os
 import xml.etree.ElementTree as ElementTree
@@ -67,7 +67,9 @@ def locate_map(map_file_path: Optional[str] = None) -> str:
         if not os.path.isfile(map_file_path):
             raise ValueError(f"road_traffic: map_file_path {map_file_path!r} is not a file")
         return map_file_path
-    spec = importlib.util.find_spec("vmas")  # finds the package without importing it
+    # the real VMAS on sys.path, found without importing it; PathFinder looks past
+    # install_as_vmas(), under which the name vmas resolves to vmas_ros
+    spec = importlib.machinery.PathFinder.find_spec("vmas")
     roots = list(spec.submodule_search_locations or []) if spec is not None else []
     for root in roots:
         candidate = os.path.join(root, MAP_FILE)
