@@ -39,6 +39,8 @@ setup(
         "train": ["torchrl>=0.14,<0.15", "tensordict>=0.14,<0.15", "onnx", "onnxscript", "onnxruntime",
                   "pettingzoo>=1.24", "matplotlib"],
         "rllib": ["ray[rllib]"],
+        # legacy gym, for wrapper="gym" (VMAS's GymWrapper) and TorchRL's VMAS spaces
+        "gym": ["gym==0.26.2"],
         "play": ["pygame"],
         "bench": ["matplotlib"],
         "test": [

@@ -12,7 +12,7 @@
 set -euo pipefail
 
 TORCH_PIN="torch==2.13.0"
-EXTRAS="ros,record,foxglove,play,train,rllib,test"
+EXTRAS="ros,record,foxglove,play,train,rllib,gym,test"
 
 start=$SECONDS
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

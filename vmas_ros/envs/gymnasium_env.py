@@ -1,15 +1,19 @@
 """``make_env(..., num_envs=1, wrapper="gymnasium")``: one environment as a ``gymnasium.Env``.
 
 Follows VMAS 1.5's gymnasium wrapper: spaces are gymnasium ``Tuple`` over the
-agents (``Dict`` by name with ``dict_spaces=True``), observations numpy
-arrays, the reward per agent (a tuple, or a dict), ``terminated`` and
-``truncated`` plain bools and ``info`` a dict by agent name. ``sum_rewards=True``
-returns one float instead, for single-reward algorithms (and it is what
-gymnasium's checker expects of a reward).
+agents (``Dict`` by name with ``dict_spaces=True``); ``reset`` returns
+``(obs, info)`` and ``step`` ``(obs, rewards, terminated, truncated, info)``,
+where ``obs`` is a list in agent order (a dict with ``dict_spaces``) of numpy
+arrays (tensors with ``return_numpy=False``), ``rewards`` the same container of
+Python floats, ``terminated``/``truncated`` bools and ``info`` a dict by agent
+name. ``env.unwrapped`` is the Environment.
+
+Beyond VMAS: ``sum_rewards=True`` returns one float, for single-reward
+algorithms (and what gymnasium's checker expects of a reward).
 """
 from __future__ import annotations
 
-from typing import Any, Dict, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import gymnasium
 import numpy as np
@@ -17,7 +21,7 @@ import numpy as np
 from vmas_ros.envs import wrapper_common as common
 from vmas_ros.envs.environment import Environment
 
-__all__ = ["GymnasiumEnv"]
+__all__ = ["GymnasiumWrapper", "GymnasiumEnv", "RENDER_MODES", "check_render_mode"]
 
 RENDER_MODES = ["rgb_array"]
 
@@ -29,13 +33,14 @@ def check_render_mode(render_mode: Optional[str]) -> Optional[str]:
     return render_mode
 
 
-class GymnasiumEnv(common.SingleEnvWrapper, gymnasium.Env):
+class GymnasiumWrapper(common.BaseGymWrapper, gymnasium.Env):
     """A single-env :class:`Environment` (``num_envs=1``) behind gymnasium's ``Env`` API.
 
     Args:
         env: the Environment, made with ``num_envs=1`` and ``terminated_truncated=True``.
-        render_mode: ``"rgb_array"`` (``render()`` returns an HxWx3 uint8 array) or None.
-        return_numpy: False keeps torch tensors (on ``env.device``) instead of numpy, as in VMAS.
+        return_numpy: False keeps torch tensors (on ``env.device``) for observations and infos.
+        render_mode: ``"rgb_array"`` (``render()`` returns an HxWx3 uint8 array) or None;
+            there is no window, so VMAS's ``"human"`` is refused.
         sum_rewards: True returns the agents' rewards summed into one float.
     """
 
@@ -44,52 +49,53 @@ class GymnasiumEnv(common.SingleEnvWrapper, gymnasium.Env):
     def __init__(
         self,
         env: Environment,
-        render_mode: Optional[str] = "rgb_array",
         return_numpy: bool = True,
+        render_mode: Optional[str] = "rgb_array",
         sum_rewards: bool = False,
     ) -> None:
         common.require_single_env(env, "gymnasium", "; use wrapper='gymnasium_vec' for a batch of envs")
         common.require_terminated_truncated(env, "gymnasium")
-        self.env = env
+        super().__init__(env, return_numpy=return_numpy, vectorized=False)
         self.render_mode = check_render_mode(render_mode)
-        self.return_numpy = return_numpy
         self.sum_rewards = sum_rewards
-        self.observation_space = env.observation_space
-        self.action_space = env.action_space
-
-    def _convert(self, value: Any) -> Any:
-        # row 0: the only env; tensors stay tensors (sliced) when return_numpy is off
-        if self.return_numpy:
-            return common.to_numpy(value, index=0)
-        return common.select_env(value, 0)
-
-    def _observation(self, obs) -> Union[Tuple, Dict[str, Any]]:
-        return common.pack(self._convert(common.by_agent(self.env, obs)), self.env.dict_spaces)
-
-    def _info(self, infos) -> Dict[str, Any]:
-        return self._convert(common.by_agent(self.env, infos))
+        self.observation_space = common.to_gymnasium_space(env.observation_space)
+        self.action_space = common.to_gymnasium_space(env.action_space)
 
     def reset(
         self, *, seed: Optional[int] = None, options: Optional[dict] = None
-    ) -> Tuple[Union[Tuple, Dict[str, Any]], Dict[str, Any]]:
+    ) -> Tuple[Union[List, Dict[str, Any]], Dict[str, Any]]:
         """Start a new episode; ``seed`` re-seeds the Environment's own streams (and ``np_random``)."""
         super().reset(seed=seed)
+        # gymnasium (its checker, too) reads the generator off env.unwrapped, which is the Environment
+        self._env._np_random = self._np_random
         if seed is not None:
-            self.env.seed(seed)
-        obs, infos = self.env.reset(return_info=True)
-        return self._observation(obs), self._info(infos)
+            self._env.seed(seed)
+        obs, infos = self._env.reset_at(0, return_info=True)
+        return self._per_agent(obs), self._infos(infos)
 
     def step(self, action: Union[Tuple, list, Dict[str, Any]]) -> Tuple[Any, Any, bool, bool, Dict[str, Any]]:
-        """Apply one action per agent (tuple/list in agent order, or dict by name)."""
-        actions = common.actions_to_tensors(self.env, action, batched=False)
-        obs, rews, terminated, truncated, infos = self.env.step(actions)
-        rewards = common.by_agent(self.env, rews)
-        if self.sum_rewards:
-            reward: Any = float(sum(float(r[0]) for r in rewards.values()))
-        elif self.return_numpy:
-            reward = common.pack({name: float(r[0]) for name, r in rewards.items()}, self.env.dict_spaces)
-        else:
-            reward = common.pack({name: r[0] for name, r in rewards.items()}, self.env.dict_spaces)
-        return self._observation(obs), reward, bool(terminated[0]), bool(truncated[0]), self._info(infos)
+        """Apply one action per agent (list/tuple in agent order, or dict by name).
+
+        Each action has the agent's action-space shape, or ``[1, size]`` as
+        ``env.unwrapped.get_random_action(agent)`` gives it.
+        """
+        actions = common.actions_to_tensors(self._env, action, batched=False, batch_of_one=True)
+        obs, rews, terminated, truncated, infos = self._env.step(actions)
+        rewards = self._scalar_rewards(rews)
+        reward: Any = float(sum(common.by_agent(self._env, rewards).values())) if self.sum_rewards else rewards
+        return self._per_agent(obs), reward, bool(terminated[0]), bool(truncated[0]), self._infos(infos)
+
+    def render(
+        self, agent_index_focus: Optional[int] = None, visualize_when_rgb: bool = False, **kwargs: Any
+    ) -> Optional[np.ndarray]:
+        """The frame as an HxWx3 uint8 array (None when made with ``render_mode=None``)."""
+        if self.render_mode is None:
+            return None
+        return self._render_env(self.render_mode, 0, agent_index_focus, visualize_when_rgb, **kwargs)
+
+    def close(self) -> None:
+        self._env.close()
 
 
+#: the name this wrapper had before it took VMAS's
+GymnasiumEnv = GymnasiumWrapper

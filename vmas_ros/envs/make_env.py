@@ -12,13 +12,15 @@ from vmas_ros.simulator.scenario import BaseScenario
 #: wrapper name -> (module, class), imported only when asked for: ``import vmas_ros``
 #: must not pull in ray, pettingzoo or torchrl
 WRAPPERS: Dict[str, Tuple[str, str]] = {
-    "gymnasium": ("vmas_ros.envs.gymnasium_env", "GymnasiumEnv"),
-    "gymnasium_vec": ("vmas_ros.envs.gymnasium_vec", "GymnasiumVecEnv"),
+    "gym": ("vmas_ros.envs.gym_env", "GymWrapper"),
+    "gymnasium": ("vmas_ros.envs.gymnasium_env", "GymnasiumWrapper"),
+    "gymnasium_vec": ("vmas_ros.envs.gymnasium_vec", "GymnasiumVectorizedWrapper"),
     "pettingzoo": ("vmas_ros.envs.pettingzoo_env", "PettingZooEnv"),
     "rllib": ("vmas_ros.envs.rllib_env", "RLlibMultiAgentEnv"),
     "torchrl": ("vmas_ros.envs.torchrl_env", "TorchRLEnv"),
 }
 #: wrappers that report terminated and truncated apart, so make_env turns the flag on for them
+#: ("gym" reports one done flag and refuses the Environment with it, as VMAS's does)
 _SPLIT_DONE = {"gymnasium", "gymnasium_vec", "pettingzoo", "rllib"}
 
 
@@ -35,8 +37,7 @@ def wrapper_name(wrapper: Union[str, Enum]) -> str:
         raise ValueError(f"wrapper must be a name or a Wrapper enum member, got {type(wrapper).__name__}")
     name = wrapper.lower()
     if name not in WRAPPERS:
-        hint = "; OpenAI gym is not supported, use 'gymnasium'" if name == "gym" else ""
-        raise ValueError(f"unknown wrapper {wrapper!r}{hint} (valid: None, {', '.join(repr(w) for w in WRAPPERS)})")
+        raise ValueError(f"unknown wrapper {wrapper!r} (valid: None, {', '.join(repr(w) for w in WRAPPERS)})")
     return name
 
 
@@ -68,10 +69,11 @@ def make_env(
 
     ``scenario`` is a registered name (see ``vmas_ros.scenarios.list_scenarios()``)
     or a BaseScenario instance; extra keyword arguments go to its ``make_world``.
-    ``wrapper`` (``"gymnasium"``, ``"gymnasium_vec"``, ``"pettingzoo"``, ``"rllib"``,
-    ``"torchrl"`` or a ``Wrapper`` member) returns that library's env instead, built
-    with ``wrapper_kwargs``; the gymnasium, pettingzoo and rllib ones always get
-    ``terminated_truncated=True`` because those APIs report the two apart.
+    ``wrapper`` (``"gym"``, ``"gymnasium"``, ``"gymnasium_vec"``, ``"pettingzoo"``,
+    ``"rllib"``, ``"torchrl"`` or a ``Wrapper`` member) returns that library's env
+    instead, built with ``wrapper_kwargs``; the gymnasium, pettingzoo and rllib
+    ones always get ``terminated_truncated=True`` because those APIs report the
+    two apart (VMAS asks the caller to pass it), while ``"gym"`` needs it False.
     ``compile_physics=True`` runs the physics step through ``torch.compile``
     (see ``World.compile_physics``: faster at large batch sizes, compiles on the
     first step; not in VMAS).

@@ -1,11 +1,16 @@
-"""What the library wrappers (gymnasium, gymnasium_vec, pettingzoo, rllib) share.
+"""What the library wrappers (gym, gymnasium, gymnasium_vec, pettingzoo, rllib) share.
 
 Every wrapper does the same three conversions: the Environment's per-agent
 tensors (a list, or a dict by name with ``dict_spaces=True``) become numpy
 arrays keyed by agent; numpy actions become ``[num_envs, size]`` tensors on
 ``env.device``; and the per-agent spaces are read off the Environment's own
-gymnasium spaces. Keeping them here means one place decides dtypes and shape
-checks, so the four wrappers cannot drift apart.
+spaces. Keeping them here means one place decides dtypes and shape checks, so
+the wrappers cannot drift apart.
+
+:class:`BaseGymWrapper` is the base of the three gym-style wrappers, under
+VMAS's name: it holds the Environment (``env`` and ``unwrapped`` both return
+it, as VMAS code expects) and packs per-agent values the way VMAS's wrappers
+return them (a list in agent order, or a dict by name with ``dict_spaces``).
 """
 from __future__ import annotations
 
@@ -19,6 +24,7 @@ from torch import Tensor
 from vmas_ros.envs.environment import Environment
 
 __all__ = [
+    "BaseGymWrapper",
     "agent_names",
     "agent_spaces",
     "actions_to_tensors",
@@ -29,6 +35,7 @@ __all__ = [
     "require_terminated_truncated",
     "select_env",
     "to_numpy",
+    "to_gymnasium_space",
     "vector_info",
 ]
 
@@ -66,15 +73,47 @@ def by_agent(env: Environment, values: Union[Sequence, Mapping]) -> Dict[str, An
     return {agent.name: value for agent, value in zip(env.agents, values)}
 
 
-def pack(values: Dict[str, Any], as_dict: bool) -> Union[Tuple, Dict[str, Any]]:
-    """A dict by agent name, or a tuple in agent order (gymnasium's Tuple space accepts tuples)."""
-    return dict(values) if as_dict else tuple(values.values())
+def pack(values: Dict[str, Any], as_dict: bool) -> Union[List, Dict[str, Any]]:
+    """A dict by agent name, or a list in agent order: what VMAS's wrappers return.
+
+    Lists, not tuples, because VMAS code checks ``isinstance(obs, list)``; the
+    ``Tuple`` spaces of gymnasium and gym accept lists in ``contains``.
+    """
+    return dict(values) if as_dict else list(values.values())
+
+
+_SPACE_TYPES = ("Box", "Discrete", "MultiDiscrete", "MultiBinary", "Tuple", "Dict")
+
+
+def to_gymnasium_space(space: Any) -> spaces.Space:
+    """The gymnasium twin of a space: itself if it is one, else a converted legacy ``gym`` space.
+
+    The Environment builds legacy ``gym`` spaces while ``install_as_vmas()`` is in
+    effect (TorchRL needs them); the gymnasium-facing wrappers still owe
+    gymnasium spaces. Read by class name and attributes, so ``gym`` is never imported here.
+    """
+    if isinstance(space, spaces.Space):
+        return space
+    kind = type(space).__name__
+    if kind not in _SPACE_TYPES or not type(space).__module__.startswith("gym."):
+        raise TypeError(f"expected a gymnasium or gym space, got {type(space).__module__}.{kind}: {space!r}")
+    if kind == "Box":
+        return spaces.Box(low=space.low, high=space.high, shape=space.shape, dtype=space.dtype)
+    if kind == "Discrete":
+        return spaces.Discrete(int(space.n), start=int(getattr(space, "start", 0)))
+    if kind == "MultiDiscrete":
+        return spaces.MultiDiscrete(space.nvec, dtype=space.dtype)
+    if kind == "MultiBinary":
+        return spaces.MultiBinary(space.n)
+    if kind == "Tuple":
+        return spaces.Tuple([to_gymnasium_space(s) for s in space.spaces])
+    return spaces.Dict({key: to_gymnasium_space(s) for key, s in space.spaces.items()})
 
 
 def agent_spaces(env: Environment) -> Tuple[Dict[str, spaces.Space], Dict[str, spaces.Space]]:
-    """Per-agent (observation, action) spaces by name, the same objects the Environment holds."""
+    """Per-agent (observation, action) gymnasium spaces by name (the Environment's own when gymnasium)."""
     names = agent_names(env)
-    obs_space, act_space = env.observation_space, env.action_space
+    obs_space, act_space = to_gymnasium_space(env.observation_space), to_gymnasium_space(env.action_space)
     if isinstance(obs_space, spaces.Dict):
         return {n: obs_space[n] for n in names}, {n: act_space[n] for n in names}
     return dict(zip(names, obs_space.spaces)), dict(zip(names, act_space.spaces))
@@ -112,12 +151,22 @@ def select_env(value: Any, index: int) -> Any:
     return value
 
 
-def _expected_shapes(space: spaces.Space, batch: Optional[int]) -> List[Tuple[int, ...]]:
-    """Action shapes accepted for one agent: the space's shape, plus a trailing 1 for Discrete."""
-    lead = () if batch is None else (batch,)
-    shapes = [lead + tuple(space.shape)]
-    if isinstance(space, spaces.Discrete):
-        shapes.append(lead + (1,))
+def _expected_shapes(space: spaces.Space, batch: Optional[int], batch_of_one: bool) -> List[Tuple[int, ...]]:
+    """Action shapes accepted for one agent, the space's own first.
+
+    The space's shape (with a leading ``num_envs`` when batched), plus a
+    trailing 1 for Discrete; with ``batch_of_one`` a single env also takes a
+    leading 1, which is what ``env.unwrapped.get_random_action(agent)`` gives
+    (``[num_envs=1, size]``) and what VMAS code feeds VMAS's single-env wrappers.
+    """
+    leads = [()] if batch is None else [(batch,)]
+    if batch is None and batch_of_one:
+        leads.append((1,))
+    shapes = []
+    for lead in leads:
+        shapes.append(lead + tuple(space.shape))
+        if isinstance(space, spaces.Discrete):
+            shapes.append(lead + (1,))
     return shapes
 
 
@@ -126,6 +175,7 @@ def actions_to_tensors(
     actions: Union[Sequence, Mapping],
     batched: bool,
     names: Optional[Sequence[str]] = None,
+    batch_of_one: bool = False,
 ) -> List[Tensor]:
     """Numpy (or list, or tensor) actions per agent -> ``[num_envs, size]`` tensors on ``env.device``.
 
@@ -134,6 +184,8 @@ def actions_to_tensors(
     a ValueError naming the agent and the expected shape here, because after the
     reshape to ``[num_envs, size]`` the Environment could no longer tell which
     shape the caller meant. Range, NaN and dtype checks stay the Environment's.
+    ``batch_of_one=True`` (the gym-style wrappers, as VMAS's) also takes a
+    single env's action with a leading dimension of 1.
     """
     names = list(names) if names is not None else agent_names(env)
     if isinstance(actions, Mapping):
@@ -162,7 +214,7 @@ def actions_to_tensors(
                 tensor = torch.as_tensor(np.asarray(action), device=env.device)
             except (TypeError, ValueError, RuntimeError) as error:
                 raise ValueError(f"action for agent {name!r} is not numeric: {error}") from None
-        accepted = _expected_shapes(space, batch)
+        accepted = _expected_shapes(space, batch, batch_of_one)
         if tuple(tensor.shape) not in accepted:
             raise ValueError(
                 f"action for agent {name!r} has shape {tuple(tensor.shape)}, expected {accepted[0]} "
@@ -220,3 +272,64 @@ class SingleEnvWrapper:
 
     def close(self) -> None:
         self.env.close()
+
+
+class BaseGymWrapper:
+    """What the gym, gymnasium and gymnasium_vec wrappers share, under VMAS's class name.
+
+    Listed first among a wrapper's bases, so ``unwrapped`` is the Environment
+    (gym's and gymnasium's own ``unwrapped`` would return the wrapper): VMAS
+    code reads ``env.unwrapped.n_agents``, ``.agents`` and ``.get_random_action(agent)``.
+
+    Args:
+        env: the Environment.
+        return_numpy: numpy arrays out (True) or torch tensors on ``env.device``.
+        vectorized: False for the single-env wrappers, which drop the batch
+            dimension (row 0) and give rewards and flags as Python scalars.
+    """
+
+    def __init__(self, env: Environment, return_numpy: bool, vectorized: bool) -> None:
+        self._env = env
+        self.return_numpy = return_numpy
+        self.dict_spaces = env.dict_spaces
+        self.vectorized = vectorized
+
+    @property
+    def env(self) -> Environment:
+        """The wrapped Environment."""
+        return self._env
+
+    @property
+    def unwrapped(self) -> Environment:
+        """The wrapped Environment, as in VMAS (not the wrapper itself)."""
+        return self._env
+
+    def _convert(self, value: Any) -> Any:
+        """Tensors (nested) to the output type: row 0 of the batch unless vectorized."""
+        index = None if self.vectorized else 0
+        if self.return_numpy:
+            return to_numpy(value, index=index)
+        return value if index is None else select_env(value, index)
+
+    def _per_agent(self, values: Union[Sequence, Mapping]) -> Union[List, Dict[str, Any]]:
+        """Observations (or batched rewards): a list in agent order, or a dict with ``dict_spaces``."""
+        return pack(self._convert(by_agent(self._env, values)), self.dict_spaces)
+
+    def _scalar_rewards(self, rews: Union[Sequence, Mapping]) -> Union[List[float], Dict[str, float]]:
+        """One env's reward per agent as Python floats, whatever ``return_numpy`` says (as VMAS)."""
+        return pack({name: float(r[0]) for name, r in by_agent(self._env, rews).items()}, self.dict_spaces)
+
+    def _infos(self, infos: Union[Sequence, Mapping]) -> Dict[str, Any]:
+        """Infos always by agent name, also without ``dict_spaces`` (as VMAS)."""
+        return self._convert(by_agent(self._env, infos))
+
+    def _render_env(self, mode: str, env_index: Optional[int], agent_index_focus: Optional[int],
+                    visualize_when_rgb: bool, **kwargs: Any) -> Any:
+        """Forward VMAS's render keywords to ``Environment.render``, only those the caller set."""
+        if agent_index_focus is not None:
+            kwargs["agent_index_focus"] = agent_index_focus
+        if visualize_when_rgb:
+            kwargs["visualize_when_rgb"] = visualize_when_rgb
+        if env_index is not None:
+            kwargs["env_index"] = env_index
+        return self._env.render(mode=mode, **kwargs)

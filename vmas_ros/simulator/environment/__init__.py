@@ -7,6 +7,7 @@ from vmas_ros.envs.environment import Environment
 class Wrapper(Enum):
     """Library wrappers ``make_env(wrapper=...)`` knows by name."""
 
+    GYM = "gym"
     GYMNASIUM = "gymnasium"
     GYMNASIUM_VEC = "gymnasium_vec"
     PETTINGZOO = "pettingzoo"
