@@ -7,6 +7,8 @@ else, and must be able to install its signal handlers before torch's second of
 imports (see vmas_ros/ros/startup.py).
 """
 import importlib
+import sys
+import types
 
 from vmas_ros.scenarios import DEBUG_SCENARIOS, MAIN_SCENARIOS, MPE_SCENARIOS, list_scenarios  # no scenario imported
 
@@ -32,6 +34,14 @@ def __getattr__(name: str):
         from vmas_ros.viz.interactive import render_interactively
 
         return render_interactively
+    if name == "Wrapper":  # VMAS's top level offers the enum of wrapper names
+        from vmas_ros.simulator.environment import Wrapper
+
+        return Wrapper
+    if name == "install_as_vmas":  # vmas_ros/compat/install.py: ``import vmas`` resolves to vmas_ros
+        from vmas_ros.compat.install import install_as_vmas
+
+        return install_as_vmas
     if name in _SUBPACKAGES:
         return importlib.import_module(f"vmas_ros.{name}")
     raise AttributeError(f"module 'vmas_ros' has no attribute {name!r}")
@@ -39,5 +49,21 @@ def __getattr__(name: str):
 
 __all__ = [
     "make_env", "render_interactively", "list_scenarios", "scenarios", "debug_scenarios", "mpe_scenarios",
-    "__version__",
+    "install_as_vmas", "__version__",
 ]
+
+
+class _Package(types.ModuleType):
+    """This package's module type: keeps ``vmas_ros.make_env`` the function.
+
+    Importing the submodule ``vmas_ros.make_env`` (VMAS's module path) would
+    otherwise bind the module to that name on this package, shadowing the function.
+    """
+
+    def __setattr__(self, name: str, value) -> None:
+        if name == "make_env" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -17,6 +17,7 @@ import torch
 from gymnasium import spaces
 from torch import Tensor
 
+from vmas_ros.compat.spaces import space_types
 from vmas_ros.envs import actions as act
 from vmas_ros.envs.limits import check_world_size
 from vmas_ros.simulator.scenario import BaseScenario
@@ -356,6 +357,8 @@ class Environment:
             return self._done()
 
     # ------------------------------------------------------------------- spaces
+    # ``spaces = space_types()``: legacy gym's classes while install_as_vmas() is in effect, as VMAS
+    # builds them (TorchRL's VmasEnv needs them), else gymnasium's (vmas_ros/compat/spaces.py)
     def get_agent_action_size(self, agent) -> int:
         comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
         if self.continuous_actions:
@@ -365,6 +368,7 @@ class Environment:
         return 1
 
     def get_agent_action_space(self, agent) -> spaces.Space:
+        spaces = space_types()
         comm = self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0
         if self.continuous_actions:
             u = agent.action.u_range_tensor.tolist()
@@ -377,11 +381,13 @@ class Environment:
         return spaces.Discrete(int(np.prod(nvec)))
 
     def get_action_space(self) -> spaces.Space:
+        spaces = space_types()
         if self.dict_spaces:
             return spaces.Dict({a.name: self.get_agent_action_space(a) for a in self.agents})
         return spaces.Tuple([self.get_agent_action_space(a) for a in self.agents])
 
     def get_agent_observation_space(self, agent, obs) -> spaces.Space:
+        spaces = space_types()
         if isinstance(obs, Tensor):
             return spaces.Box(low=-np.inf, high=np.inf, shape=tuple(obs.shape[1:]), dtype=np.float32)
         if isinstance(obs, dict):
@@ -389,11 +395,17 @@ class Environment:
         raise TypeError(f"observation of agent {agent.name!r} must be a tensor or a dict of tensors, got {type(obs).__name__}")
 
     def get_observation_space(self, observations) -> spaces.Space:
+        spaces = space_types()
         if self.dict_spaces:
             return spaces.Dict({a.name: self.get_agent_observation_space(a, observations[a.name]) for a in self.agents})
         return spaces.Tuple([self.get_agent_observation_space(a, o) for a, o in zip(self.agents, observations)])
 
     # ----------------------------------------------------------- random actions
+    @property
+    def batch_dim(self) -> int:
+        """VMAS's name for ``num_envs``: the number of batched environments."""
+        return self.num_envs
+
     def get_random_action(self, agent) -> Tensor:
         with self._own_rng():
             if self.continuous_actions:
