@@ -33,7 +33,8 @@ ALLOWED = {
     ("vmas.simulator.dynamics.forward", "*"): _INTERNAL,
     ("vmas.simulator.dynamics.kinematic_bicycle", "*"): _INTERNAL,
     ("vmas.simulator.environment.environment", "Environment"):
-        "render(**kwargs) takes VMAS's keywords; plot_function, vmas_random_state, metadata not yet matched",
+        "render takes agent_index_focus and visualize_when_rgb, not the plot_position_function family "
+        "(raises); plot_function, vmas_random_state, metadata not yet matched",
     ("vmas.simulator.environment.environment", "*"): _INTERNAL,
     ("vmas.simulator.environment.rllib", "*"): "RLlib's batched VectorEnvWrapper belongs to the Ray training issue",
     ("vmas.simulator.environment.gym.base", "*"): "wrappers follow gymnasium's API; EnvData is VMAS-internal",

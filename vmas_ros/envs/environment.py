@@ -415,20 +415,32 @@ class Environment:
             if self.multidiscrete_actions:
                 nvec = torch.tensor(space.nvec, device=self.device)
                 return (torch.rand(self.num_envs, len(space.nvec), device=self.device) * nvec).long()
-            return torch.randint(0, int(space.n), (self.num_envs, 1), device=self.device)
+            return torch.randint(0, int(space.n), (self.num_envs,), device=self.device)  # [B], as VMAS
 
     def get_random_actions(self) -> List[Tensor]:
         return [self.get_random_action(agent) for agent in self.agents]
 
     # ---------------------------------------------------------------- rendering
-    def render(self, mode: str = "rgb_array", env_index: int = 0, **kwargs):
-        """Draw env ``env_index`` headless into an RGB array [H, W, 3] (no display needed)."""
+    def render(self, mode: str = "rgb_array", env_index: int = 0, agent_index_focus: Optional[int] = None,
+               visualize_when_rgb: bool = False, plot_position_function=None, **kwargs):
+        """Draw env ``env_index`` headless into an RGB array [H, W, 3] (no display needed).
+
+        VMAS's keywords are taken: ``agent_index_focus`` centres the view on that
+        agent; ``visualize_when_rgb`` (show the frame in a window) has nothing
+        to do here, since no window is ever opened. VMAS's
+        ``plot_position_function`` heat maps are not drawn: passing one raises.
+        Other keywords go to ``vmas_ros.viz.scene.render_world``.
+        """
         from vmas_ros.viz.scene import render_world
 
         if mode not in ("rgb_array", "human"):
             raise ValueError(f"render mode must be 'rgb_array' or 'human', got {mode!r}")
         if not 0 <= env_index < self.num_envs:
             raise ValueError(f"env_index {env_index} out of range for {self.num_envs} envs")
+        if plot_position_function is not None:
+            raise ValueError("render: plot_position_function (VMAS's heat map of a function of position) "
+                             "is not supported by vmas_ros's renderer; pass None")
+        kwargs = {**kwargs, **({} if agent_index_focus is None else {"agent_index_focus": agent_index_focus})}
         extra = self.scenario.extra_render(env_index)
         return render_world(
             self.world, env_index=env_index, extra_geoms=extra,
