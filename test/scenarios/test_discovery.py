@@ -273,8 +273,12 @@ def test_heuristic_reacts_to_its_observation():
     crowded[0, 19 + 3] = 0.1  # an agent on ray 3 of the agent lidar (0.05 + pi / 2: straight up)
     away = discovery.HeuristicPolicy(use_agent_lidar=True).compute_action(crowded, 1.0)[0]
     assert away[1] < -0.9
-    with pytest.raises(ValueError, match="width"):
-        policy.compute_action(torch.zeros(1, 31), 1.0)
+    # built without kwargs (as VMAS code builds it), the agent lidar is read from the width
+    torch.testing.assert_close(discovery.HeuristicPolicy().compute_action(crowded, 1.0)[0], away)
+    with pytest.raises(ValueError, match="width 19 or 31"):
+        policy.compute_action(torch.zeros(1, 25), 1.0)
+    with pytest.raises(ValueError, match="width 19, got 31"):
+        discovery.HeuristicPolicy(use_agent_lidar=False).compute_action(crowded, 1.0)
 
 
 @pytest.mark.parametrize("semidims", [(1.0, 1.0), (1.5, 0.6)])

@@ -274,3 +274,11 @@ def test_heuristic_reaches_goals_and_beats_random(options):
     heuristic_return, random_return = returns.mean(dim=0).tolist()
     assert int(done_ever[:16].sum()) >= 13 and not done_ever[16:].any(), done_ever
     assert heuristic_return > random_return + 4, returns
+
+
+def test_heuristic_takes_vmas_qp_parameters():
+    """VMAS's heuristic is built with its QP's clf_epsilon and clf_slack; ours accepts and checks them."""
+    policy = navigation.HeuristicPolicy(True, clf_epsilon=0.4, clf_slack=100.0)
+    assert policy.compute_action(torch.zeros(3, 4 + 2 + 12), 1.0).shape == (3, 2)
+    with pytest.raises(ValueError, match="clf_epsilon"):
+        navigation.HeuristicPolicy(True, clf_epsilon=0)

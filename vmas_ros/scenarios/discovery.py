@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Optional
 
 import torch
 from torch import Tensor
@@ -390,7 +391,9 @@ class HeuristicPolicy(BaseHeuristicPolicy):
       away from an agent closer than ``spread_range``.
 
     The observation layout and the loop depend on the scenario's kwargs, so
-    the policy takes them (defaults match the scenario's).
+    the policy takes them (defaults match the scenario's). ``use_agent_lidar``
+    left as None is read from the observation's width, as VMAS's heuristic
+    is built without kwargs.
     """
 
     row_spacing = 0.5
@@ -404,7 +407,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         continuous_action: bool = True,
         n_lidar_rays_entities: int = DEFAULTS["n_lidar_rays_entities"],
         n_lidar_rays_agents: int = DEFAULTS["n_lidar_rays_agents"],
-        use_agent_lidar: bool = DEFAULTS["use_agent_lidar"],
+        use_agent_lidar: Optional[bool] = None,
         lidar_range: float = DEFAULTS["lidar_range"],
         x_semidim: float = DEFAULTS["x_semidim"],
         y_semidim: float = DEFAULTS["y_semidim"],
@@ -421,9 +424,13 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         self.loop = sweep_loop(x_semidim, y_semidim, self.row_spacing)
 
     def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
-        width = 4 + self.n_target_rays + self.n_agent_rays * self.use_agent_lidar
-        if observation.shape[-1] != width:
-            raise ValueError(f"discovery heuristic: expected observation width {width}, got {observation.shape[-1]}")
+        widths = {False: 4 + self.n_target_rays, True: 4 + self.n_target_rays + self.n_agent_rays}
+        agent_lidar = self.use_agent_lidar
+        if agent_lidar is None:  # read from the layout
+            agent_lidar = observation.shape[-1] == widths[True]
+        if observation.shape[-1] != widths[agent_lidar]:
+            expected = widths[agent_lidar] if self.use_agent_lidar is not None else " or ".join(map(str, widths.values()))
+            raise ValueError(f"discovery heuristic: expected observation width {expected}, got {observation.shape[-1]}")
         if self.loop.device != observation.device:  # move the tables once, not every step
             self.loop = self.loop.to(observation.device)
             self._target_rays = self._target_rays.to(observation.device)
@@ -435,7 +442,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         nearest, ray = targets.min(dim=-1)
         seen = (nearest < self.lidar_range - 1e-4).unsqueeze(-1)
         action = action + self.target_pull * seen * self._target_rays[ray]
-        if self.use_agent_lidar:
+        if agent_lidar:
             agents = observation[:, 4 + self.n_target_rays:]
             closest, agent_ray = agents.min(dim=-1)
             crowded = (~seen) & (closest < self.spread_range).unsqueeze(-1)

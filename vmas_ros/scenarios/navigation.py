@@ -311,6 +311,11 @@ class HeuristicPolicy(BaseHeuristicPolicy):
     ``k`` and a little sideways (``swerve``, always to the same hand, so two
     agents meeting head-on pass each other instead of stalling). The force
     is a velocity loop on the wanted velocity, clipped to the action range.
+
+    ``clf_epsilon`` and ``clf_slack`` are VMAS's heuristic's QP parameters
+    (decay rate of the CLF, cost of relaxing it): accepted, so VMAS code that
+    passes them runs, and checked to be positive; this controller has no QP
+    for them to tune.
     """
 
     gain = 1.5
@@ -319,8 +324,12 @@ class HeuristicPolicy(BaseHeuristicPolicy):
     repulsion = 3.0
     swerve = 0.6
 
-    def __init__(self, continuous_action: bool = True, goal_slot: int = 0, **scenario_kwargs) -> None:
+    def __init__(self, continuous_action: bool = True, clf_epsilon: float = 0.2, clf_slack: float = 100.0,
+                 goal_slot: int = 0, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
+        for name, value in (("clf_epsilon", clf_epsilon), ("clf_slack", clf_slack)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                raise ValueError(f"navigation heuristic: {name} must be a number > 0, got {value!r}")
         cfg = heuristic_kwargs("navigation", DEFAULTS, scenario_kwargs)
         n_goals = cfg["n_agents"] if cfg["observe_all_goals"] else 1
         if isinstance(goal_slot, bool) or not isinstance(goal_slot, int) or not 0 <= goal_slot < n_goals:
