@@ -8,8 +8,9 @@
 #   VMAS_ROS_PYTHON          interpreter used to create it (default: python3.11, else python3)
 #
 # Inside it: torch==2.13.0 (pinned first, as in setup.sh: an unpinned torch
-# pulls a CUDA build), benchmarl, and vmas_ros (editable, with the gym extra
-# that install_as_vmas() needs for TorchRL's VMAS spaces).
+# pulls a CUDA build), benchmarl, vmas_ros (editable, with the gym extra
+# that install_as_vmas() needs for TorchRL's VMAS spaces), and onnx for
+# vmas-ros export --from-benchmarl.
 set -euo pipefail
 
 TORCH_PIN="torch==2.13.0"
@@ -46,12 +47,14 @@ fi
 stamp_file="$VENV/.vmas_ros_benchmarl_stamp"
 stamp="$(cat setup.py scripts/setup_benchmarl.sh | "$PY" -c 'import hashlib, sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest())')"
 if [ -f "$stamp_file" ] && [ "$(cat "$stamp_file")" = "$stamp" ] \
-    && "$PY" -c 'import benchmarl, vmas_ros' 2>/dev/null; then
+    && "$PY" -c 'import benchmarl, vmas_ros, onnx, onnxruntime' 2>/dev/null; then
     log "packages: up to date"
 else
     pip_q install "$TORCH_PIN"
     pip_q install "$BENCHMARL_PIN" "$TORCH_PIN"
     pip_q install -e ".[gym]" "$TORCH_PIN"
+    # vmas-ros export --from-benchmarl converts the policy here, with torch.onnx
+    pip_q install onnx onnxscript onnxruntime "$TORCH_PIN"
     echo "$stamp" > "$stamp_file"
     log "installed: $("$PY" -c 'import importlib.metadata as m; print(", ".join(f"{p} {m.version(p)}" for p in ("torch", "torchrl", "benchmarl", "vmas_ros")))')"
 fi

@@ -9,7 +9,7 @@ Subcommands:
     evaluate  each scenario's heuristic against random play (mean episode returns, CSV/Markdown)
     render  roll out a scenario and save it as a GIF, MP4 or PNG
     train   train a policy with CPPO, MAPPO, IPPO or HetIPPO (TorchRL PPO); exports it to ONNX
-    export  export a training checkpoint's policy as <stem>.onnx + <stem>.json
+    export  export a training checkpoint's (or a BenchMARL run's) policy as <stem>.onnx + <stem>.json
     train-suite  the paper's Figure 3: every algorithm on every scenario (and seed), one plot per
             scenario against its heuristic, a 2x2 figure, CSV and Markdown summary
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
@@ -220,7 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
                                  "on several scenarios and plot them against the heuristics")
     add_train_suite_arguments(train_suite)
     train_suite.set_defaults(func=run_train_suite_command)
-    export = sub.add_parser("export", help="export a training checkpoint as <stem>.onnx + <stem>.json")
+    export = sub.add_parser(
+        "export", help="export a training checkpoint or a BenchMARL run as <stem>.onnx + <stem>.json")
     add_export_arguments(export)
     export.set_defaults(func=run_export_command)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")

@@ -118,14 +118,51 @@ def run_train_command(args: argparse.Namespace) -> int:
 
 
 def add_export_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--checkpoint", required=True, metavar="PATH",
-                        help="checkpoint.pt, or a run directory containing one")
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--checkpoint", metavar="PATH", help="checkpoint.pt, or a run directory containing one")
+    source.add_argument("--from-benchmarl", metavar="RUN_DIR",
+                        help="a BenchMARL MAPPO/IPPO run folder (or checkpoint .pt), converted in BenchMARL's venv")
     parser.add_argument("--out", required=True, metavar="STEM",
                         help="writes STEM.onnx and STEM.json (the policy format OnnxPolicy and the ROS node load)")
+    parser.add_argument("--benchmarl-python", metavar="PATH",
+                        help="BenchMARL venv's python for --from-benchmarl (default: $VMAS_ROS_BENCHMARL_VENV/bin/python "
+                             "or <repo>/.venv-benchmarl/bin/python, made by scripts/setup_benchmarl.sh)")
 
 
 def run_export_command(args: argparse.Namespace) -> int:
-    """Export a checkpoint's deterministic policy to ONNX + JSON metadata."""
+    """Export a checkpoint's (or a BenchMARL run's) deterministic policy to ONNX + JSON metadata."""
+    if getattr(args, "from_benchmarl", None):
+        # BenchMARL unpickles the run in its own venv; this side only reads the ONNX + JSON it writes
+        import os
+        import subprocess
+
+        from vmas_ros.policy.onnx_policy import OnnxPolicy
+
+        repo = Path(__file__).resolve().parents[2]
+        python = args.benchmarl_python or str(
+            Path(os.environ.get("VMAS_ROS_BENCHMARL_VENV") or repo / ".venv-benchmarl") / "bin" / "python")
+        if not Path(python).is_file():
+            print(f"vmas-ros export: no BenchMARL python at {python}; create BenchMARL's venv with "
+                  f"`bash scripts/setup_benchmarl.sh` (in {repo}) or pass --benchmarl-python", file=sys.stderr)
+            return 2
+        out = Path(args.out).resolve()
+        out = out.with_suffix("") if out.suffix in (".onnx", ".json") else out
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])))
+        run = subprocess.run([python, "-m", "vmas_ros.train.benchmarl_export", str(Path(args.from_benchmarl).resolve()),
+                              str(out)], cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if run.returncode != 0:
+            errors = [line for line in run.stderr.splitlines() if line.startswith("vmas-ros export")]
+            print("\n".join(errors) or run.stderr[-4000:] or f"vmas-ros export: conversion failed ({python})",
+                  file=sys.stderr)
+            return 2
+        json_path = out.parent / (out.name + ".json")
+        try:
+            OnnxPolicy.load(json_path)
+        except ValueError as error:
+            print(f"vmas-ros export: the converted policy does not load: {error}", file=sys.stderr)
+            return 2
+        print(f"wrote {out.parent / (out.name + '.onnx')} and {json_path}")
+        return 0
     from vmas_ros.train.export import export_checkpoint
 
     try:

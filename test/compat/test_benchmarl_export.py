@@ -1,0 +1,74 @@
+"""``vmas-ros export --from-benchmarl``: a BenchMARL MAPPO run becomes our STEM.onnx + STEM.json.
+
+A tiny MAPPO run on BenchMARL's VMAS navigation task (``test.compat.benchmarl_run``,
+BenchMARL's venv from ``scripts/setup_benchmarl.sh``); BenchMARL's own
+deterministic actions on observations from stepping the task's env
+(``test.compat.benchmarl_actions``, same venv); the CLI conversion; then, in this
+venv, ``OnnxPolicy`` on those observations must give those actions within 1e-5.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from vmas_ros.policy import OnnxPolicy
+
+ROOT = Path(__file__).resolve().parents[2]
+VENV = Path(os.environ.get("VMAS_ROS_BENCHMARL_VENV", ROOT / ".venv-benchmarl"))
+
+
+def _run(cmd, **kwargs):
+    result = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=900, **kwargs)
+    assert result.returncode == 0, f"{cmd}\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
+    return result
+
+
+def _benchmarl_python() -> str:
+    _run(["bash", "scripts/setup_benchmarl.sh"])  # BenchMARL, vmas_ros and the ONNX exporter's packages
+    return str(VENV / "bin" / "python")
+
+
+def test_benchmarl_mappo_exports_to_onnx_matching_benchmarl(tmp_path):
+    python = _benchmarl_python()
+    trained = _run([python, "-m", "test.compat.benchmarl_run", "--algorithm", "mappo", "--task", "navigation",
+                    "--out", str(tmp_path / "run"), "--frames", "1200"])
+    result = json.loads(trained.stdout.strip().splitlines()[-1])
+    checkpoint = result["checkpoints"][-1]
+
+    # BenchMARL's deterministic actions on observations of the task's env, recorded in its own venv
+    _run([python, "-m", "test.compat.benchmarl_actions", checkpoint, str(tmp_path / "recorded"), "--steps", "15"])
+    observations = np.load(tmp_path / "recorded" / "observations.npy")
+    expected = np.load(tmp_path / "recorded" / "actions.npy")
+    assert observations.shape == (90, 3, 18) and expected.shape == (90, 3, 2)  # 6 envs x 15 steps, 3 agents
+
+    stem = tmp_path / "policy" / "navigation_mappo"
+    _run([sys.executable, "-m", "vmas_ros.cli", "export", "--from-benchmarl", result["folder"], "--out", str(stem),
+          "--benchmarl-python", python])
+
+    policy = OnnxPolicy.load(str(stem) + ".json")
+    actions = policy.act(observations)
+    assert actions.shape == expected.shape
+    np.testing.assert_allclose(actions, expected, atol=1e-5, rtol=0)
+    assert np.abs(expected).max() > 1e-3  # a real comparison, not zeros against zeros
+
+    meta = json.loads(Path(str(stem) + ".json").read_text())
+    assert meta["scenario"] == "navigation" and meta["algorithm"] == "mappo"
+    assert meta["scenario_kwargs"]["n_agents"] == 3 and meta["scenario_kwargs"]["lidar_range"] == 0.35
+    assert meta["max_steps"] == 100 and "max_steps" not in meta["scenario_kwargs"]
+    assert meta["agents"] == ["agent_0", "agent_1", "agent_2"]
+
+
+def test_export_from_benchmarl_refuses_clearly(tmp_path):
+    missing = subprocess.run([sys.executable, "-m", "vmas_ros.cli", "export", "--from-benchmarl", str(tmp_path),
+                              "--out", str(tmp_path / "p"), "--benchmarl-python", str(tmp_path / "nope")],
+                             cwd=ROOT, capture_output=True, text=True)
+    assert missing.returncode == 2 and "setup_benchmarl.sh" in missing.stderr
+    both = subprocess.run([sys.executable, "-m", "vmas_ros.cli", "export", "--from-benchmarl", str(tmp_path),
+                           "--checkpoint", str(tmp_path), "--out", str(tmp_path / "p")],
+                          cwd=ROOT, capture_output=True, text=True)
+    assert both.returncode == 2 and "not allowed with" in both.stderr
