@@ -226,39 +226,72 @@ class Scenario(BaseScenario):
         return [walls]
 
 
+BAND = BLOCK_WIDTH / 2 + RADIUS  # a disc whose centre is this close to y = 0 touches a block, unless in a gap
+
+
 class HeuristicPolicy(BaseHeuristicPolicy):
-    """Dribble the ball: circle round it to its far side, then push it to the gap, then the goal.
+    """Dribble the ball gently up a funnel to the gap, through it, then to the goal; agents keep off the blocks.
 
-    Each agent reads the ball, the goal and the gaps from its observation. The
-    ball's target is a point below the nearest gap while it is low and off
-    the gap's axis, the gap's far side once lined up (or level with the
-    barrier), and the goal once above it. An agent's place is straight behind
-    the ball as seen from that target (``side_angle`` can turn it sideways).
-    While the agent is more than ``behind_angle`` off its place it orbits
-    the ball (tangential speed ``orbit_speed`` the short way round, holding
-    ``orbit_radius``) instead of driving through it; once there it drives at
-    the contact point and on along the push direction, slowing near the
-    target since the ball keeps its speed. The gap takes one at a time: near
-    the barrier the agent not in contact waits below, and once the ball is
-    through, an agent still below heads for the gap itself. The wanted
-    velocity becomes a force through a feed-forward against the drag plus a
-    proportional term. Continuous actions only.
+    The ball has no drag and a tiny friction (it slows by 0.02 per second),
+    while the agents top out at about 0.14 per axis: a ball pushed too hard
+    rolls away out of reach, overshoots the gap's axis or runs into the
+    barrier or a wall. So every push is paced: the agent behind the ball
+    moves along the push direction at the speed from which friction alone
+    would stop the ball at its mark (``pace_factor`` of
+    ``sqrt(2 * ball_decel * distance)``, below ``max_pace``), and only
+    closes a gap of more than ``slack`` behind its contact point faster
+    (chasing a rolling ball and kicking it again is what sends it off).
 
-    It brings the ball much closer than random play, but agents still jam
-    against the barrier's blocks near the gap, and those penalties can eat
-    the gain in total return.
+    Below the barrier the ball follows a funnel: it is pushed towards the
+    gap's axis aimed at a point a ``funnel``-th of the way up to a staging
+    line ``stage_depth`` below the blocks, so it meets the axis moving
+    straight up; its speed towards the staging line and towards the axis are
+    paced separately. Once within ``align_tol`` of the axis (or inside the
+    gap's column near the barrier) it is pushed straight up at
+    ``climb_pace`` with a ``lateral`` correction, and rolls through the gap
+    on its own if need be. A ball that ended up just under the blocks off
+    the axis is steered no lower than its pusher can reach from below them
+    (level along the barrier). Above the barrier it is paced to the goal.
+
+    An agent reaches its place behind the ball by orbiting it (the short way
+    round, but under the ball when the ball is near the barrier, since the
+    top is blocked). The blocks are kept off by a filter on the wanted
+    velocity: outside a gap's column an agent moves towards the barrier no
+    faster than closes its distance to ``clearance`` outside the band blocks
+    touch a disc in (so it stops there, or is sent back from closer); in a
+    column (within ``enter_tol`` of its axis, ``channel_tol`` once inside)
+    it may go on and is held on the axis within ``margin`` of the band.
+    Balls still graze the blocks now and then
+    when they reach the gap with some sideways speed. An agent left below
+    once the ball is through lines up under the gap and goes through it.
+    The agents do not see each other; both push, one often behind the other.
+    The wanted velocity becomes a force through a feed-forward against the
+    drag plus a proportional term. Continuous actions only.
     """
 
-    push_speed = 0.2
-    max_speed = 0.5
+    max_speed = 0.3
     orbit_speed = 0.3
     orbit_radius = 3 * RADIUS
-    behind_angle = 0.4
+    behind_angle = 0.35  # rad off its place at which an agent stops orbiting and pushes
     gain = 3.0
-    side_angle = 0.0  # rad off the push line, towards the agent's own side
     feedforward = 5.0  # force per unit of held speed: drag 0.25 per 0.1 s step, mass 2
     feedback = 4.0
     u_multiplier = 0.7
+    ball_decel = 0.02  # the ball's friction deceleration
+    pace_factor = 0.35  # a pushed ball runs ahead faster than its pusher: stay well under the stopping speed
+    min_pace = 0.02
+    max_pace = 0.13
+    climb_pace = 0.08  # enough for the ball to roll through the gap by itself
+    stage_depth = 0.1  # the staging line, below the band blocks touch a disc in
+    funnel = 3.0
+    align_tol = 0.01
+    lateral = 8.0
+    slack = 0.1
+    low_orbit_zone = 0.15  # ball this close below the band: orbit under it
+    margin = 0.035  # within this of the band an agent in a gap's column holds its axis
+    clearance = 0.01  # outside a gap's column agents stay this far outside the band
+    enter_tol = 0.006
+    channel_tol = 0.017  # a disc this far off a gap's axis does not touch its blocks
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
@@ -268,16 +301,56 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         validate(config)
         self.n_passages = config["n_passages"]
 
-    def _ball_target(self, ball: Tensor, goal: Tensor, gaps: Tensor) -> Tensor:
-        """Where the ball should go next: [b, 2]."""
+    @staticmethod
+    def _nearest_gap(gaps: Tensor, point: Tensor) -> Tensor:
+        """The gap whose axis is nearest ``point`` along x: gaps [b, n, 2], point [b, 2] -> [b, 2]."""
         rows = torch.arange(gaps.shape[0], device=gaps.device)
-        gap = gaps[rows, torch.linalg.vector_norm(gaps - ball.unsqueeze(1), dim=-1).argmin(dim=1)]
-        below = gap + torch.tensor([0.0, -BLOCK_WIDTH / 2 - 4 * RADIUS], device=gap.device)
-        beyond = gap + torch.tensor([0.0, BLOCK_WIDTH / 2 + 3 * RADIUS], device=gap.device)
-        lined_up = (ball[:, 0] - gap[:, 0]).abs() < 0.015
-        low = (ball[:, 1] < below[:, 1] + 2 * RADIUS) & ~lined_up
-        passing = ball[:, 1] <= BLOCK_WIDTH / 2 + RADIUS
-        return torch.where(low.unsqueeze(-1), below, torch.where(passing.unsqueeze(-1), beyond, goal))
+        return gaps[rows, (gaps[..., 0] - point[:, :1]).abs().argmin(dim=1)]
+
+    def _reach(self, distance: Tensor) -> Tensor:
+        """The paced speed for a ball that should stop within ``distance`` (same shape)."""
+        return self.pace_factor * torch.sqrt(2 * self.ball_decel * distance.clamp_min(0))
+
+    def _ball_plan(self, ball: Tensor, goal: Tensor, gap: Tensor) -> tuple:
+        """Where and how fast to push the ball: unit direction [b, 2], pace [b, 1], and its height
+        below the band [b, 1] (negative once in or above it)."""
+        dx = ball[:, :1] - gap[:, :1]
+        h = -BAND - ball[:, 1:]
+        above = ball[:, 1:] > BAND
+        entering = ~above & (h < self.stage_depth) & (dx.abs() < self.channel_tol)
+        funnel = torch.cat([-dx, (h - self.stage_depth) / self.funnel], dim=1)
+        climb = torch.cat([-self.lateral * dx, torch.ones_like(dx)], dim=1)
+        to_goal = goal - ball
+        direction = torch.where(above, to_goal, torch.where(entering, climb, funnel))
+        direction = direction / torch.linalg.vector_norm(direction, dim=-1, keepdim=True).clamp_min(1e-6)
+        # a ball just under the blocks can only be pushed from a place clear of them: steer no lower than that
+        lowest = ((self.clearance - h) / (2 * RADIUS)).clamp(-1.0, 0.5)
+        low = ~above & ~entering & (direction[:, 1:] < lowest)
+        level = torch.cat([torch.sign(direction[:, :1]) * torch.sqrt(1 - lowest**2), lowest], dim=1)
+        direction = torch.where(low, level, direction)
+        # below: pace the climb towards the staging line and the run towards the axis separately
+        climbing = entering | (dx.abs() < self.align_tol)
+        to_stage = self._reach(h - self.stage_depth) + 0.005
+        up_speed = torch.where(climbing, torch.full_like(dx, self.climb_pace), to_stage)
+        across_speed = self._reach(dx.abs()) + self.min_pace
+        pace = torch.minimum(up_speed / direction[:, 1:].abs().clamp_min(1e-6),
+                             across_speed / direction[:, :1].abs().clamp_min(1e-6))
+        to_goal_pace = self._reach(torch.linalg.vector_norm(to_goal, dim=-1, keepdim=True)) + self.min_pace
+        pace = torch.where(above, to_goal_pace, pace).clamp(max=self.max_pace)
+        return direction, pace, h
+
+    def _keep_off_blocks(self, wanted: Tensor, pos: Tensor, own_gap: Tensor) -> Tensor:
+        """Filter the wanted velocity [b, 2] so an agent at ``pos`` never reaches a block."""
+        y, dx = pos[:, 1:], pos[:, :1] - own_gap[:, :1]
+        side = torch.where(y >= 0, 1.0, -1.0)  # away from the barrier
+        near = y.abs() < BAND + self.margin  # close enough to hold a gap's axis
+        allowed = (dx.abs() < self.enter_tol) | ((y.abs() < BAND) & (dx.abs() < self.channel_tol))
+        # towards the barrier no faster than closes the distance to ``clearance`` outside the band
+        room = y.abs() - BAND - self.clearance
+        towards = (-side * wanted[:, 1:]).clamp(max=self.gain * room)
+        wy = torch.where(allowed, wanted[:, 1:], -side * towards)
+        wx = torch.where(near & allowed, -self.gain * dx, wanted[:, :1])  # hold the gap's axis
+        return torch.cat([wx, wy], dim=1)
 
     def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
         width = 8 + 2 * self.n_passages
@@ -286,35 +359,34 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         pos, vel = observation[:, 0:2], observation[:, 2:4]
         goal, ball = pos - observation[:, 4:6], pos - observation[:, 6:8]
         gaps = pos.unsqueeze(1) - observation[:, 8:].view(-1, self.n_passages, 2)
-        push = self._ball_target(ball, goal, gaps) - ball
-        push_dir = push / torch.linalg.vector_norm(push, dim=-1, keepdim=True).clamp_min(1e-6)
-        across = torch.stack([-push_dir[:, 1], push_dir[:, 0]], dim=-1)
+        push_dir, pace, h = self._ball_plan(ball, goal, self._nearest_gap(gaps, ball))
 
         rel = observation[:, 6:8]  # agent relative to the ball
         dist = torch.linalg.vector_norm(rel, dim=-1, keepdim=True).clamp_min(1e-6)
         radial = rel / dist
-        side = torch.where((rel * across).sum(-1, keepdim=True) < 0, -1.0, 1.0)
-        near_barrier = (ball[:, 1:] > -BLOCK_WIDTH / 2 - 4 * RADIUS) & (ball[:, 1:] < BLOCK_WIDTH / 2 + 2 * RADIUS)
-        angle = torch.where(near_barrier, 0.0, self.side_angle)
-        place = -push_dir * torch.cos(angle) + side * across * torch.sin(angle)  # unit, from the ball
-
+        place = -push_dir  # unit, from the ball
         # signed angle from the agent's bearing to its place, about the ball
         error = torch.atan2(radial[:, 0] * place[:, 1] - radial[:, 1] * place[:, 0], (radial * place).sum(-1))
         tangent = torch.stack([-radial[:, 1], radial[:, 0]], dim=-1)  # counter-clockwise about the ball
-        orbit = self.orbit_speed * torch.sign(error).unsqueeze(-1) * tangent
-        orbit = orbit + self.gain * (self.orbit_radius - dist) * radial
-        contact = ball + place * (2 * RADIUS)
-        # slow down near the target: the ball keeps its speed once pushed
-        pace = self.push_speed * (torch.linalg.vector_norm(push, dim=-1, keepdim=True) / 0.3).clamp(0.2, 1.0)
-        dribble = self.gain * (contact - pos) + pace * push_dir
-        placed = (error.abs() < self.behind_angle).unsqueeze(-1)
-        wanted = torch.where(placed, dribble, orbit)
-        # the ball passes the gap with one pusher: the other waits below, then takes the gap itself
-        waiting = near_barrier & (dist > 3 * RADIUS) & (pos[:, 1:] < ball[:, 1:])
-        wanted = torch.where(waiting, torch.zeros_like(wanted), wanted)
-        left_behind = (pos[:, 1:] < 0) & (ball[:, 1:] > 0) & ~waiting
-        own_way = self.gain * (self._ball_target(pos, goal, gaps) - pos)
-        wanted = torch.where(left_behind, own_way, wanted)
-        wanted = TorchUtils.clamp_with_norm(wanted, self.max_speed)
+        turn = torch.sign(error).unsqueeze(-1)
+        under = torch.where(radial[:, :1] > 0, -1.0, 1.0)  # the way round that passes below the ball
+        turn = torch.where((h > -BAND) & (h < self.low_orbit_zone), under, turn)
+        orbit = self.orbit_speed * turn * tangent + self.gain * (self.orbit_radius - dist) * radial
+        gap_to_contact = ball + place * (2 * RADIUS) - pos
+        along = (gap_to_contact * push_dir).sum(-1, keepdim=True)
+        speed = pace + self.gain * ((along - self.slack).clamp_min(0) + along.clamp_max(0))
+        dribble = self.gain * (gap_to_contact - along * push_dir) + speed * push_dir
+        wanted = torch.where((error.abs() < self.behind_angle).unsqueeze(-1), dribble, orbit)
+
+        # the ball is through and this agent is not: line up under the gap, then go up through it
+        own_gap = self._nearest_gap(gaps, pos)
+        off_axis = (pos[:, :1] - own_gap[:, :1]).abs()
+        lined_up = (off_axis < self.enter_tol) | ((pos[:, 1:].abs() < BAND) & (off_axis < self.channel_tol))
+        way_y = torch.where(lined_up, BAND + 0.15, -BAND - self.margin - 0.02)
+        way = torch.cat([own_gap[:, :1], way_y], dim=1)
+        left_behind = (pos[:, 1:] < BAND) & (ball[:, 1:] > BAND)
+        wanted = torch.where(left_behind, self.gain * (way - pos), wanted)
+
+        wanted = TorchUtils.clamp_with_norm(self._keep_off_blocks(wanted, pos, own_gap), self.max_speed)
         force = self.feedforward * wanted + self.feedback * (wanted - vel)
         return (force / self.u_multiplier).clamp(-u_range, u_range)
