@@ -221,7 +221,13 @@ class HeuristicPolicy(BaseHeuristicPolicy):
       both act at the centre of mass) and turns the line to the target tilt.
       The target tilt points the normal at the goal (at most ``max_tilt``,
       and never so steep that the low end touches the floor), corrected to
-      roll the package back towards the middle of the line. The common push
+      roll the package back towards the middle of the line. The turn fades
+      out as the line's speed along ``n`` falls short of the wanted speed (to
+      nothing at a shortfall of ``cruise``): lift first, then turn. At the
+      start the package bounces off the line and lands back on it; turning
+      at once would take the push the line needs to catch it, and the
+      package would sink, away from the goal, for a step or two (VMAS's own
+      test requires its distance to the goal never to grow). The common push
       is kept far enough inside [``min_push``, u_range] for every torque share,
       so no agent lets go of the line or saturates;
     * damps its speed along the line relative to the line's.
@@ -299,9 +305,11 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         wanted_speed = (self.goal_gain * along(to_goal, normal)).clamp(-self.cruise, self.cruise)
         common = self.hover / torch.cos(tilt) + self.speed_gain * (wanted_speed - rise)
         # torque about the formation's centroid: carry the load (weight and drag, both acting at the
-        # centre of mass, where the common pushes would hold it), and turn the line to the target tilt
+        # centre of mass, where the common pushes would hold it), and turn the line to the target tilt,
+        # the less the more the line's speed along n falls short of the wanted one (lift first)
         carry = self.load_share * self.n_agents * common.clamp(0.0, u_range) * (mass_centre - centroid)
-        torque = carry + self.tilt_gain * (target_tilt - tilt) - self.spin_damping * spin
+        ready = (1.0 - (wanted_speed - rise) / self.cruise).clamp(0.0, 1.0)
+        torque = carry + ready * self.tilt_gain * (target_tilt - tilt) - self.spin_damping * spin
         most = (u_range - self.min_push) / 2 * lever_sum / max_lever
         torque = torque.maximum(-most).minimum(most)
         # keep the common push far enough inside [min_push, u_range] for every agent's torque share
