@@ -62,6 +62,28 @@ def test_benchmarl_mappo_exports_to_onnx_matching_benchmarl(tmp_path):
     assert meta["max_steps"] == 100 and "max_steps" not in meta["scenario_kwargs"]
     assert meta["agents"] == ["agent_0", "agent_1", "agent_2"]
 
+    # the converted policy drives sim_node (control: policy), in a process of its own on loopback DDS
+    drive = _run([sys.executable, "-c", SIM_NODE_DRIVES.format(json=str(stem) + ".json")],
+                 env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+    moved = json.loads(drive.stdout.strip().splitlines()[-1])
+    assert min(moved) > 0.01, moved  # every agent moved under the policy
+
+
+SIM_NODE_DRIVES = """
+import json, rclpy
+from vmas_ros.ros.sim_node import SimNode
+meta = json.load(open({json!r}))
+rclpy.init()
+node = SimNode(scenario=meta["scenario"], scenario_kwargs=json.dumps(meta["scenario_kwargs"]), control="policy",
+               policy_path={json!r}, num_envs=1)
+start = [a.state.pos.clone() for a in node.env.agents]
+for _ in range(20):
+    node.step_once()
+print(json.dumps([float((a.state.pos - s).norm()) for a, s in zip(node.env.agents, start)]))
+node.destroy_node()
+rclpy.shutdown()
+"""
+
 
 def test_export_from_benchmarl_refuses_clearly(tmp_path):
     missing = subprocess.run([sys.executable, "-m", "vmas_ros.cli", "export", "--from-benchmarl", str(tmp_path),
