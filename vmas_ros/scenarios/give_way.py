@@ -86,7 +86,7 @@ class Wall(NamedTuple):
     x: float
     y: float
     vertical: bool
-    nook: bool  # part of a nook (``passage_collision_penalty``) rather than a plain wall
+    nook: bool = False  # part of a nook (``passage_collision_penalty``) rather than a plain wall
 
 
 def map_layout(mirror_passage: bool) -> list[Wall]:

@@ -43,13 +43,12 @@ Kwargs
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
-from vmas_ros.scenarios.give_way import PID_PARAMS, VelocityController, track_velocity
+from vmas_ros.scenarios.give_way import PID_PARAMS, VelocityController, Wall, track_velocity
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -74,16 +73,6 @@ COLORS = (Color.GREEN, Color.BLUE, Color.RED, Color.GRAY)
 #: unit vector of each agent's start arm, by agent index: west, north, east, south.
 #: Agent i's goal lies in the arm of agent i - 1 (mod 4).
 ARMS = ((-1.0, 0.0), (0.0, 1.0), (1.0, 0.0), (0.0, -1.0))
-
-
-class Wall(NamedTuple):
-    """One line landmark of the map."""
-
-    name: str
-    length: float
-    x: float
-    y: float
-    vertical: bool
 
 
 def map_layout() -> list[Wall]:
