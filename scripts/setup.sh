@@ -26,30 +26,13 @@ export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1
 log() { echo "setup.sh: $*"; }
 die() { echo "setup.sh: error: $*" >&2; exit 1; }
 
-# pip, quietly: drop its "Location ... is ignored" warnings (local index
-# mirrors that lack a package), keep everything else, return pip's status.
-pip_q() {
-    local rc
-    set +e
-    "$PY" -m pip -q "$@" 2>&1 | grep -v -E "^WARNING: Location '.*' is ignored" >&2
-    rc=${PIPESTATUS[0]}
-    set -e
-    return "$rc"
-}
+. "$ROOT/scripts/venv_lib.sh"  # pip_q, base_python
 
 # 1. the venv
 if [ -x "$PY" ] && "$PY" -c 'import sys; assert sys.version_info >= (3, 10)' 2>/dev/null; then
     log "venv $VENV: present"
 else
-    base="${VMAS_ROS_PYTHON:-}"
-    if [ -z "$base" ]; then
-        for cand in python3.11 python3; do
-            if command -v "$cand" >/dev/null 2>&1; then base="$cand"; break; fi
-        done
-    fi
-    [ -n "$base" ] || die "no python3.11 or python3 on PATH"
-    "$base" -c 'import sys; assert sys.version_info >= (3, 10)' 2>/dev/null \
-        || die "$base is older than Python 3.10"
+    base="$(base_python)"
     if [ -e "$VENV" ] && [ ! -f "$VENV/pyvenv.cfg" ] && [ -n "$(ls -A "$VENV" 2>/dev/null)" ]; then
         die "$VENV exists and is not a venv; remove it or set VMAS_ROS_VENV"
     fi
@@ -60,7 +43,7 @@ fi
 # 2. everything else, unless the last successful run installed the same thing
 # into this venv from this checkout (stamp = hash of the packaging files).
 stamp_file="$VENV/.vmas_ros_setup_stamp"
-stamp="$(cat setup.py setup.cfg package.xml scripts/setup.sh | "$PY" -c '
+stamp="$(cat setup.py setup.cfg package.xml scripts/setup.sh scripts/venv_lib.sh | "$PY" -c '
 import hashlib, sys
 h = hashlib.sha256(sys.stdin.buffer.read())
 h.update(sys.argv[1].encode())

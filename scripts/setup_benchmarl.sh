@@ -23,29 +23,17 @@ PY="$VENV/bin/python"
 export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1
 
 log() { echo "setup_benchmarl.sh: $*"; }
-pip_q() {
-    local rc
-    set +e
-    "$PY" -m pip -q "$@" 2>&1 | grep -v -E "^WARNING: Location '.*' is ignored" >&2
-    rc=${PIPESTATUS[0]}
-    set -e
-    return "$rc"
-}
+die() { echo "setup_benchmarl.sh: error: $*" >&2; exit 1; }
+. "$ROOT/scripts/venv_lib.sh"  # pip_q, base_python
 
 if [ ! -x "$PY" ]; then
-    base="${VMAS_ROS_PYTHON:-}"
-    if [ -z "$base" ]; then
-        for cand in python3.11 python3; do
-            if command -v "$cand" >/dev/null 2>&1; then base="$cand"; break; fi
-        done
-    fi
-    [ -n "$base" ] || { echo "setup_benchmarl.sh: error: no python3.11 or python3 on PATH" >&2; exit 1; }
+    base="$(base_python)"
     "$base" -m venv --clear "$VENV"
     log "venv $VENV: created"
 fi
 
 stamp_file="$VENV/.vmas_ros_benchmarl_stamp"
-stamp="$(cat setup.py scripts/setup_benchmarl.sh | "$PY" -c 'import hashlib, sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest())')"
+stamp="$(cat setup.py scripts/setup_benchmarl.sh scripts/venv_lib.sh | "$PY" -c 'import hashlib, sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest())')"
 if [ -f "$stamp_file" ] && [ "$(cat "$stamp_file")" = "$stamp" ] \
     && "$PY" -c 'import benchmarl, vmas_ros, onnx, onnxruntime' 2>/dev/null; then
     log "packages: up to date"
