@@ -74,7 +74,8 @@ def test_command_writes_csv_and_markdown(tmp_path, capsys):
     assert [(r["scenario"], r["policy"]) for r in rows] == [
         ("simple_spread", "heuristic"), ("simple_spread", "random"), ("simple_tag", "heuristic"), ("simple_tag", "random")]
     assert "adversary=" in rows[2]["team_returns"] and "agent=" in rows[2]["team_returns"]
-    table = out.with_suffix(".md").read_text()
+    header, table = out.with_suffix(".md").read_text().split("\n\n", 1)
+    assert header.startswith("Produced by `vmas-ros evaluate") and "torch " in header  # what made it, and where
     assert "| `simple_spread` |" in table and "| `simple_tag` |" in table
     assert table in capsys.readouterr().out
 
@@ -84,3 +85,20 @@ def test_command_rejects_bad_input(capsys):
     assert "simple_sprad" in capsys.readouterr().err
     assert cli.main(["evaluate", "--scenarios", "simple", "--max-steps", "0", "--quiet"]) == 2
     assert "--max-steps" in capsys.readouterr().err
+
+
+def test_zero_reward_worlds_are_scored_on_their_task():
+    """diff_drive pays nothing; its heuristic drives home, which its task score (minus the distance) sees."""
+    from vmas_ros.bench.heuristics import format_markdown
+    from vmas_ros.scenarios import task_score
+
+    heuristic, random = evaluate_scenario("diff_drive", num_envs=8, max_steps=60)
+    assert heuristic.mean_return == random.mean_return == 0.0
+    assert heuristic.task_score > random.task_score + 5, (heuristic.task_score, random.task_score)
+    assert heuristic.task_score_name == "minus the mean distance to the origin [m]"
+    table = format_markdown([heuristic, random])
+    assert "| `diff_drive` | minus the mean distance to the origin [m] | " in table
+
+    assert task_score("simple_spread") is None  # a real reward: no stand-in
+    name, _, kwargs = task_score("pollock")
+    assert kwargs == {"lidar": True} and "clearance" in name

@@ -13,7 +13,12 @@ records per env:
   ``adversary`` and ``agent``) the same mean, because competitive tasks only
   make sense per team;
 * the fraction of envs that reported done within ``max_steps`` ("solved" for
-  tasks whose episode ends on success).
+  tasks whose episode ends on success);
+* for the worlds whose reward is always zero (some debug scenarios), the
+  **task score**: the sum over the episode of the per-step stand-in score the
+  scenario module defines (``vmas_ros.scenarios.task_score``), averaged over
+  envs. Such a scenario is built with the kwargs its score needs, which the
+  table shows.
 
 Results go to ``<out>.csv`` and ``<out>.md`` (the Markdown table) besides
 being printed.
@@ -22,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 import re
 import sys
 import time
@@ -54,14 +60,19 @@ class Evaluation:
     done_fraction: float = 0.0
     mean_episode_length: float = 0.0
     seconds: float = 0.0
+    task_score: Optional[float] = None  # the stand-in score's episode sum, where the reward is always zero
+    task_score_name: str = ""  # what that score measures
+    scenario_kwargs: Dict[str, object] = field(default_factory=dict)
 
 
-def episode_returns(env, policy, max_steps: int, progress=None) -> tuple:
+def episode_returns(env, policy, max_steps: int, progress=None, on_step=None) -> tuple:
     """One batched episode from ``env.reset()``: per-agent returns [A, B], per-env lengths [B]
     and which envs finished [B].
 
     Every agent plays ``policy.compute_action`` (uniform random actions when ``policy`` is
     None); an env's rewards count up to and including its first done step.
+    ``on_step(observations, counted)``, if given, is called after every step with the new
+    observations and the [B] mask of envs whose step still counts.
     """
     obs = env.reset()
     returns = torch.zeros(env.n_agents, env.num_envs, device=env.device)
@@ -75,6 +86,8 @@ def episode_returns(env, policy, max_steps: int, progress=None) -> tuple:
         obs, rews, dones, _ = env.step(actions)
         returns += torch.stack(rews) * running
         length += running
+        if on_step is not None:
+            on_step(obs, running)
         running = running & ~dones
         if progress is not None:
             progress.update(1)
@@ -87,15 +100,23 @@ def evaluate_scenario(
 ) -> List[Evaluation]:
     """The heuristic's and random play's :class:`Evaluation` on scenario ``name``."""
     import vmas_ros
-    from vmas_ros.scenarios import make_heuristic
+    from vmas_ros.scenarios import make_heuristic, task_score
 
-    kwargs = dict(scenario_kwargs or {})
+    stand_in = task_score(name)
+    score_name, score_fn, score_kwargs = stand_in if stand_in is not None else ("", None, {})
+    kwargs = {**score_kwargs, **(scenario_kwargs or {})}
     results = []
     for label in ("heuristic", "random"):
         env = vmas_ros.make_env(name, num_envs=num_envs, device=device, seed=seed, **kwargs)
         policy = make_heuristic(name, **kwargs) if label == "heuristic" else None
+        score = torch.zeros(num_envs, device=env.device)
+
+        def add_score(observations, counted, env=env, score=score):
+            score.add_(score_fn(env, observations) * counted)
+
         start = time.perf_counter()
-        returns, length, finished = episode_returns(env, policy, max_steps, progress)
+        returns, length, finished = episode_returns(
+            env, policy, max_steps, progress, on_step=add_score if score_fn is not None else None)
         teams: Dict[str, List[int]] = {}
         for i, agent in enumerate(env.agents):
             teams.setdefault(team_of(agent.name), []).append(i)
@@ -105,6 +126,8 @@ def evaluate_scenario(
             team_returns={team: float(returns[rows].mean()) for team, rows in teams.items()},
             done_fraction=float(finished.float().mean()), mean_episode_length=float(length.mean()),
             seconds=time.perf_counter() - start,
+            task_score=float(score.mean()) if score_fn is not None else None, task_score_name=score_name,
+            scenario_kwargs=kwargs,
         ))
     return results
 
@@ -125,26 +148,54 @@ def format_markdown(results: Sequence[Evaluation]) -> str:
         "| scenario | heuristic return | random return | heuristic per team | done within episode (heuristic / random) |",
         "| --- | ---: | ---: | --- | ---: |",
     ]
+    scored = []
     for name, pair in by_scenario.items():
         h, r = pair["heuristic"], pair["random"]
-        lines.append(f"| `{name}` | {h.mean_return:.2f} | {r.mean_return:.2f} | {_teams_text(h)} | "
+        label = f"`{name}`" + (f" ({_kwargs_text(h.scenario_kwargs)})" if h.scenario_kwargs else "")
+        lines.append(f"| {label} | {h.mean_return:.2f} | {r.mean_return:.2f} | {_teams_text(h)} | "
                      f"{h.done_fraction:.0%} / {r.done_fraction:.0%} |")
+        if h.task_score is not None:
+            scored.append((label, h, r))
+    if scored:
+        lines += [
+            "", "Worlds whose reward is always zero, scored instead on their heuristic's stated goal "
+            "(per-step score summed over the episode, mean over envs; higher is better):", "",
+            "| scenario | task score | heuristic | random |", "| --- | --- | ---: | ---: |",
+        ]
+        lines += [f"| {label} | {h.task_score_name} | {h.task_score:.2f} | {r.task_score:.2f} |"
+                  for label, h, r in scored]
     return "\n".join(lines) + "\n"
 
 
-def write_results(results: Sequence[Evaluation], out: Path) -> List[Path]:
-    """``<out>.csv`` (one row per scenario and policy) and ``<out>.md`` (the table)."""
+def _kwargs_text(kwargs: Dict[str, object]) -> str:
+    return ", ".join(f"{key}={value!r}" for key, value in kwargs.items())
+
+
+def provenance(command: str) -> str:
+    """A line saying what produced a results file and where: the command, machine, torch, date."""
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    return (f"Produced by `{command}` on {platform.system()} {cpu} ({os.cpu_count()} CPUs), "
+            f"torch {torch.__version__}, {time.strftime('%Y-%m-%d')}.")
+
+
+def write_results(results: Sequence[Evaluation], out: Path, header: str = "") -> List[Path]:
+    """``<out>.csv`` (one row per scenario and policy) and ``<out>.md`` (``header``, then the table)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     csv_path, md_path = out.with_suffix(".csv"), out.with_suffix(".md")
     with csv_path.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["scenario", "policy", "num_envs", "max_steps", "mean_return", "team_returns",
-                         "done_fraction", "mean_episode_length", "seconds"])
+                         "done_fraction", "mean_episode_length", "seconds", "task_score", "task_score_name",
+                         "scenario_kwargs"])
         for r in results:
             teams = ";".join(f"{team}={value:.6g}" for team, value in r.team_returns.items())
             writer.writerow([r.scenario, r.policy, r.num_envs, r.max_steps, f"{r.mean_return:.6g}", teams,
-                             f"{r.done_fraction:.4g}", f"{r.mean_episode_length:.4g}", f"{r.seconds:.3g}"])
-    md_path.write_text(format_markdown(results))
+                             f"{r.done_fraction:.4g}", f"{r.mean_episode_length:.4g}", f"{r.seconds:.3g}",
+                             "" if r.task_score is None else f"{r.task_score:.6g}", r.task_score_name,
+                             _kwargs_text(r.scenario_kwargs)])
+    md_path.write_text((header + "\n\n" if header else "") + format_markdown(results))
     return [csv_path, md_path]
 
 
@@ -187,6 +238,7 @@ def run_evaluate_command(args: argparse.Namespace) -> int:
             results += evaluate_scenario(name, args.eval_num_envs, args.max_steps, args.seed, args.device,
                                          progress=bar)
     print(format_markdown(results))
-    for path in write_results(results, Path(args.out)):
+    command = "vmas-ros evaluate " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["evaluate"] else "vmas-ros evaluate"
+    for path in write_results(results, Path(args.out), header=provenance(command)):
         print(f"wrote {path}")
     return 0

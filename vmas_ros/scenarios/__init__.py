@@ -97,6 +97,21 @@ def make_heuristic(name: str, continuous_action: bool = True, **scenario_kwargs)
     return policy_class(continuous_action=continuous_action, **accepted)
 
 
+def task_score(name: str):
+    """Scenario ``name``'s stand-in score, for worlds whose reward is always zero; None elsewhere.
+
+    A few debug worlds have no task, so their heuristics chase a goal stated in
+    their docstrings (drive home, stay level, keep clear). Such a module defines
+    ``TASK_SCORE`` (what is scored), ``task_score(env, observations) -> [B]``
+    (the per-step score, higher is better) and optionally ``EVALUATE_KWARGS``
+    (kwargs the score needs). Returns ``(TASK_SCORE, task_score, EVALUATE_KWARGS)``.
+    """
+    module = _module(name)
+    if not hasattr(module, "task_score"):
+        return None
+    return module.TASK_SCORE, module.task_score, dict(getattr(module, "EVALUATE_KWARGS", {}))
+
+
 def heuristic(name: str):
     """The ``HeuristicPolicy`` class shipped with scenario ``name``."""
     module = _module(name)

@@ -108,6 +108,20 @@ class Scenario(SpawnScenario):
         return world
 
 
+# ------------------------------------------------------------ evaluation
+#: What ``vmas-ros evaluate`` scores this reward-less world on, per step (see ``task_score``).
+TASK_SCORE = "minus the mean distance to the origin [m]"
+
+
+def task_score(env, observations) -> Tensor:
+    """[B]: minus the agents' mean distance to the origin, the heuristic's stand-in goal.
+
+    The reward is always zero, so ``vmas-ros evaluate`` sums this per step instead to tell
+    a heuristic from random play. ``observations`` (one [B, 4] per agent) are not needed.
+    """
+    return -torch.stack([agent.state.pos.norm(dim=-1) for agent in env.agents]).mean(dim=0)
+
+
 # ----------------------------------------------------------------- heuristics
 def wrap_angle(angle: Tensor) -> Tensor:
     """``angle`` mapped to [-pi, pi)."""

@@ -79,6 +79,20 @@ class Scenario(SpawnScenario):
         return crashed.any(dim=-1)
 
 
+#: What ``vmas-ros evaluate`` scores this reward-less world on, per step (see ``task_score``).
+TASK_SCORE = "minus the drones' mean tilt [deg]"
+
+
+def task_score(env, observations) -> Tensor:
+    """[B]: minus the drones' mean tilt (the norm of roll and pitch), in degrees.
+
+    The reward is always zero, so ``vmas-ros evaluate`` sums this per step instead;
+    staying level is the heuristic's goal (and what keeps an episode alive).
+    """
+    tilts = [agent.dynamics.drone_state[:, :2].norm(dim=-1) for agent in env.agents]
+    return -torch.rad2deg(torch.stack(tilts).mean(dim=0))
+
+
 class HeuristicPolicy(BaseHeuristicPolicy):
     """Keep the drone level: drive roll and pitch to zero, no yaw torque.
 

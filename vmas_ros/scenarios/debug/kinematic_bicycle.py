@@ -38,7 +38,7 @@ from torch import Tensor
 
 from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
 from vmas_ros.scenarios.debug.diff_drive import (
-    HOLO_MULTIPLIER, SUBSTEPS, SpawnScenario, check_n_agents, holonomic_home, steer_home,
+    HOLO_MULTIPLIER, SUBSTEPS, TASK_SCORE, SpawnScenario, check_n_agents, holonomic_home, steer_home, task_score,
 )
 from vmas_ros.simulator.core import Agent, Box, World
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation
@@ -50,6 +50,7 @@ DEFAULTS = {
     "max_steering_angle": math.radians(30.0), "max_speed": 1.0,
 }
 COLLISION_FORCE = 500
+__all__ = ["HeuristicPolicy", "Scenario", "TASK_SCORE", "task_score"]  # the task score is diff_drive's
 
 
 def validate(config: dict) -> dict:

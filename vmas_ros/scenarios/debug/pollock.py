@@ -105,6 +105,23 @@ class Scenario(BaseScenario):
         return agent.sensors[0].measure()
 
 
+#: What ``vmas-ros evaluate`` scores this reward-less world on, per step (see ``task_score``),
+#: and the kwargs it evaluates with: without a lidar an agent senses nothing to keep clear of.
+TASK_SCORE = "the agents' mean clearance, nearest lidar hit [m]"
+EVALUATE_KWARGS = {"lidar": True}
+
+
+def task_score(env, observations) -> Tensor:
+    """[B]: the agents' mean clearance, their nearest lidar reading (``LIDAR_RANGE`` when none).
+
+    The reward is always zero, so ``vmas-ros evaluate`` sums this per step instead.
+    Needs ``lidar=True`` (``EVALUATE_KWARGS``): the observations are then the readings.
+    """
+    if not env.scenario.lidar:
+        raise ValueError(f"{NAME}: the task score reads the lidar; build the env with lidar=True")
+    return torch.stack([obs.min(dim=-1).values for obs in observations]).mean(dim=0)
+
+
 class HeuristicPolicy(BaseHeuristicPolicy):
     """Keep clear of whatever the lidar sees; stand still when nothing is near.
 
