@@ -14,6 +14,7 @@ only module-level and class-level names are compared, not signatures.
 from __future__ import annotations
 
 import ast
+import enum
 import importlib
 import inspect
 import types
@@ -43,6 +44,21 @@ def ours(vmas_path: str) -> str:
     return "vmas_ros" + vmas_path[len("vmas"):]
 
 
+def _default_text(value) -> str:
+    """A default as comparable text: an enum member by class and name (VMAS's ``Color`` and ours are
+    different classes with equal members), a function or lambda by kind only (its repr holds an address),
+    a class by name, a number by value."""
+    if isinstance(value, enum.Enum):
+        return f"{type(value).__name__}.{value.name}"
+    if inspect.isfunction(value) or inspect.isbuiltin(value):
+        return "<function>"
+    if inspect.isclass(value):
+        return f"<class {value.__name__}>"  # VMAS's RandomPolicy and ours
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return repr(float(value))  # 100 and 100.0 are the same default
+    return repr(value)
+
+
 def _describe_callable(prefix: str, obj) -> str:
     try:
         sig = inspect.signature(obj)
@@ -52,7 +68,7 @@ def _describe_callable(prefix: str, obj) -> str:
     for p in sig.parameters.values():
         text = f"{p.name}:{p.kind.name}"
         if p.default is not inspect.Parameter.empty:
-            text += f"={p.default!r}"
+            text += f"={_default_text(p.default)}"
         parts.append(text)
     return f"{prefix}({', '.join(parts)})"
 

@@ -43,6 +43,9 @@ def _has_noise(u_noise) -> bool:
 class Environment:
     """A batch of ``num_envs`` environments of one scenario, stepped together."""
 
+    #: VMAS's render modes and vectorised flag (``rgb_array`` frames are drawn headless, ``human`` too)
+    metadata = {"render.modes": ["human", "rgb_array"], "runtime.vectorized": True}
+
     def __init__(
         self,
         scenario: BaseScenario,
@@ -67,7 +70,7 @@ class Environment:
             raise ValueError("multidiscrete_actions=True needs continuous_actions=False")
         self.scenario = scenario
         self.num_envs = num_envs
-        self.device = torch.device(device)
+        self._device = torch.device(device)
         self.max_steps = max_steps
         self.continuous_actions = continuous_actions
         self.dict_spaces = dict_spaces
@@ -402,6 +405,11 @@ class Environment:
 
     # ----------------------------------------------------------- random actions
     @property
+    def device(self) -> torch.device:
+        """The torch device every tensor of this env lives on (move with ``to``)."""
+        return self._device
+
+    @property
     def batch_dim(self) -> int:
         """VMAS's name for ``num_envs``: the number of batched environments."""
         return self.num_envs
@@ -450,7 +458,7 @@ class Environment:
         )
 
     def to(self, device) -> None:
-        self.device = torch.device(device)
+        self._device = torch.device(device)
         self.scenario.to(self.device)
         self.steps = self.steps.to(self.device)
 

@@ -136,6 +136,20 @@ def save_video(name: str, frame_list: List, fps: int):
     return save_frames(frame_list, f"{name}{suffix}", fps=fps)
 
 
+def extract_nested_with_index(data, index: int):
+    """Env ``index`` of a batched tensor, or of every tensor in a (nested) dict of them.
+
+    ``data`` is a ``[B, ...]`` tensor or a dict whose values are tensors or such
+    dicts (dict observations); the result has the same nesting with ``[...]``
+    leaves. Anything else raises ``TypeError`` naming its type.
+    """
+    if isinstance(data, Tensor):
+        return data[index]
+    if isinstance(data, dict):
+        return {key: extract_nested_with_index(value, index) for key, value in data.items()}
+    raise TypeError(f"extract_nested_with_index: expected a tensor or a dict of them, got {type(data).__name__}")
+
+
 class TorchUtils:
     """Batched helpers scenarios use; all take and return tensors on the input's device."""
 

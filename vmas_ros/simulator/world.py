@@ -454,7 +454,7 @@ class World(RayQueries, ActionInputs, StateAccess):
             raise TypeError(f"distance between {a.shape!r} and {b.shape!r} is not supported")
         return self._pick(value, env_index)
 
-    def collides(self, entity_a: Entity, entity_b: Entity) -> bool:
+    def collides(self, a: Entity, b: Entity) -> bool:
         """Could the two entities exert contact forces on each other now, in some env?
 
         VMAS 1.5's query: both want to collide with the other (``collide`` and
@@ -463,7 +463,6 @@ class World(RayQueries, ActionInputs, StateAccess):
         centres are within the sum of their circumscribed radii. A query for
         scenarios, not part of the step: it reads that last test back to the host.
         """
-        a, b = entity_a, entity_b
         if a is b or not a.collides(b) or not b.collides(a):
             return False
         if not (a.movable or a.rotatable or b.movable or b.rotatable):
