@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import vmas_ros
-from vmas_ros.simulator import physics
+from vmas_ros.simulator.physics.thresholds import GEMM_SCATTER_MAX_CELLS
 
 STEPS = 8
 
@@ -132,7 +132,7 @@ def test_compiled_step_with_more_pairs_than_a_dense_scatter_equals_eager(device)
     from vmas_ros.simulator.core import Agent, Sphere, World
 
     n, batch = 40, 3
-    assert n * (n * (n - 1) // 2) > physics.GEMM_SCATTER_MAX_CELLS
+    assert n * (n * (n - 1) // 2) > GEMM_SCATTER_MAX_CELLS
     worlds = []
     for compiled in (False, True):
         world = World(batch_dim=batch, device=device)

@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from vmas_ros.simulator import physics
+from vmas_ros.simulator.physics.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 
 DT, DRAG, MASS, STEPS = 0.1, 0.25, 2.0, 3
@@ -55,8 +56,8 @@ def test_contact_free_gradient_is_exact(batch, held, device):
     expected = DT * DT / MASS * sum(keep ** k for k in range(STEPS))
     torch.testing.assert_close(grad[:, 0], torch.full((batch,), expected, device=device), rtol=1e-5, atol=0)
     assert torch.equal(grad[:, 1], torch.zeros(batch, device=device))
-    if held == "landmark" and batch > physics.SMALL_BATCH_ELEMENTS // 9:
-        assert physics.step_constants(world.tables, world._step_params())["free_span"] is not None
+    if held == "landmark" and batch > SMALL_BATCH_ELEMENTS // 9:
+        assert physics.step_constants(world.tables, world._step_params()).free_span is not None
 
 
 def _push(batch: int, device: str) -> torch.Tensor:

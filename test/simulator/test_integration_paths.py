@@ -1,6 +1,6 @@
 """The step's three ways of keeping held entities still give bit-identical states.
 
-``physics.step_planar`` integrates free entities and leaves held ones (not
+``physics.step`` integrates free entities and leaves held ones (not
 movable / not rotatable) untouched in one of three ways, picked by batch size
 and layout: ``torch.where`` with bool masks (small batches), copying the held
 (coordinate, entity) rows back with ``index_copy`` (large batches), or,
@@ -15,9 +15,12 @@ import pytest
 import torch
 
 from vmas_ros.simulator import physics
+from vmas_ros.simulator.physics import integrator
+from vmas_ros.simulator.physics.constants import _free_span
+from vmas_ros.simulator.physics.integrator import Hold
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 
-BATCH = 4096  # 3 x N x 4096 is above physics.SMALL_BATCH_ELEMENTS: the float-mask / block paths
+BATCH = 4096  # 3 x N x 4096 is above physics.thresholds.SMALL_BATCH_ELEMENTS: the float-mask / block paths
 STEPS = 5
 
 
@@ -56,20 +59,22 @@ def _run(world: World, gen_seed: int):
     out = [state]
     for _ in range(STEPS):
         actions = (torch.rand(3, tables.n_entities, BATCH, generator=gen) - 0.5).to(state.q.device)
-        state = physics.step_planar(state, tables, params, actions, None)
+        state = physics.step(state, tables, params, actions, None)
         out.append(state)
     return out
 
 
 def _paths(world: World, monkeypatch):
-    """The same run through the block path (if the layout has one), the float masks and torch.where."""
+    """The same run with the integrator's own choice, and forced through each way of holding entities
+    still that applies: the free block (if the layout has one), copying held rows back, torch.where."""
     c = physics.step_constants(world.tables, world._step_params())
     runs = {"default": _run(world, 1)}
-    with monkeypatch.context() as m:
-        m.setitem(c, "free_span", None)
-        runs["held_rows"] = _run(world, 1)
-        m.setattr(physics, "SMALL_BATCH_ELEMENTS", 10 ** 12)
-        runs["where"] = _run(world, 1)
+    for hold in (Hold.BLOCK, Hold.ROWS, Hold.WHERE):
+        if hold is Hold.BLOCK and c.free_span is None:
+            continue
+        with monkeypatch.context() as m:
+            m.setattr(integrator, "hold_method", lambda constants, elements, hold=hold: hold)
+            runs[hold.name.lower()] = _run(world, 1)
     return c, runs
 
 
@@ -78,13 +83,15 @@ def test_every_path_gives_the_same_bits(layout, device, monkeypatch):
     world = _world(layout, device)
     c, runs = _paths(world, monkeypatch)
     has_block = layout in ("landmarks_first", "held_last", "walls", "substeps")
-    assert (c["free_span"] is not None) == has_block
-    assert len(c["held_rows"]) == int((~c["free_bool"]).sum())  # held (coordinate, entity) rows, any layout
+    assert (c.free_span is not None) == has_block
+    assert ("block" in runs) == has_block
+    assert integrator.hold_method(c, 3 * c.free.shape[1] * BATCH) is (Hold.BLOCK if has_block else Hold.ROWS)
+    assert len(c.held_rows) == int((~c.free).sum())  # held (coordinate, entity) rows, any layout
     for name, run in runs.items():
         for step, (ours, ref) in enumerate(zip(run, runs["where"])):
             assert torch.equal(ours.q, ref.q) and torch.equal(ours.v, ref.v), f"{layout}: {name} differs at step {step}"
     first, last = runs["default"][0], runs["default"][-1]
-    held = ~c["free_bool"][..., 0]  # [3, N]
+    held = ~c.free[..., 0]  # [3, N]
     assert held.any()
     # held rows keep their velocity and position; free rows moved
     assert torch.equal(first.v[held], last.v[held])
@@ -95,7 +102,7 @@ def test_every_path_gives_the_same_bits(layout, device, monkeypatch):
 def test_free_span_detection(device):
     def span(rows):  # rows: per entity, (movable, rotatable)
         free = torch.tensor([[m for m, _ in rows], [m for m, _ in rows], [r for _, r in rows]], device=device)
-        return physics._free_span(free.unsqueeze(-1))
+        return _free_span(free.unsqueeze(-1))
 
     assert span([(False, False), (True, True), (True, True)]) == (1, 3)
     assert span([(True, True), (True, True), (False, False)]) == (0, 2)

@@ -23,7 +23,8 @@ from test.simulator.physics_helpers import (
 )
 from vmas_ros.simulator import physics
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
-from vmas_ros.simulator.utils import LINE_MIN_DIST
+from vmas_ros.simulator.physics.collision import pair_forces
+from vmas_ros.simulator.utils import LINE_MIN_DIST, TorchUtils
 
 # --------------------------------------------------------------------- free motion
 
@@ -158,13 +159,13 @@ def test_pair_forces_are_equal_and_opposite(device, case):
         rot=torch.stack([e.state.rot for e in world.entities]),
         ang_vel=torch.stack([e.state.ang_vel for e in world.entities]),
     )
-    f_a, f_b, t_a, t_b = physics.pair_forces(pair, state, world._step_params())
+    f_a, f_b, t_a, t_b = pair_forces(pair, state, world._step_params())
     assert float(f_a.norm()) > 1e-3, "the configuration must actually be in contact"
     assert torch.equal(f_a, -f_b)
     # the two forces act along one line: torques about the origin cancel (angular momentum)
     ia, ib = pair.index_a, pair.index_b
     r_a, r_b = state.pos[ia], state.pos[ib]
-    total_torque = physics.cross(r_a, f_a) + physics.cross(r_b, f_b) + t_a + t_b
+    total_torque = TorchUtils.cross(r_a, f_a) + TorchUtils.cross(r_b, f_b) + t_a + t_b
     assert float(total_torque.abs().max()) < 1e-5 * float(f_a.norm())
 
 
@@ -399,7 +400,7 @@ def test_action_force_limits(device):
 def test_softplus_of_overlap_matches_logaddexp_where_contacts_are_active():
     """The fast contact magnitude equals ``log(1 + exp(x))`` to float rounding for every ``x >= 0``
     (active contacts), is finite below 0 (masked out later), and has the same gradient."""
-    from vmas_ros.simulator.contacts import softplus_of_overlap
+    from vmas_ros.simulator.physics.collision.contact import softplus_of_overlap
 
     x = torch.linspace(0, 60, 200_001)
     exact = torch.logaddexp(torch.zeros(()), x.double()).float()
@@ -413,7 +414,7 @@ def test_softplus_of_overlap_matches_logaddexp_where_contacts_are_active():
 @pytest.mark.parametrize("batch", [1, 40])
 def test_pair_scatter_by_gemm_equals_index_add(batch, device, monkeypatch):
     """Pair forces added through the dense incidence GEMM equal the index_add scatter to rounding."""
-    from vmas_ros.simulator import physics
+    from vmas_ros.simulator.physics import scatter
     from vmas_ros.simulator.tables import PairTable
 
     gen = torch.Generator().manual_seed(7)
@@ -424,11 +425,11 @@ def test_pair_scatter_by_gemm_equals_index_add(batch, device, monkeypatch):
     on_a = torch.randn(2, len(pairs), batch, generator=gen).to(device)
     start = torch.randn(2, n, batch, generator=gen).to(device)
     results = []
-    for cells in (0, physics.GEMM_SCATTER_MAX_CELLS):
-        monkeypatch.setattr(physics, "GEMM_SCATTER_MAX_CELLS", cells)
+    for cells in (0, scatter.GEMM_SCATTER_MAX_CELLS):
+        monkeypatch.setattr(scatter, "GEMM_SCATTER_MAX_CELLS", cells)
         monkeypatch.setattr(torch, "get_num_threads", lambda: 2)
         force = start.clone()
-        physics._add_pairs_opposite(force, table, on_a)
+        scatter.add_pairs_opposite(force, table, on_a)
         results.append(force)
     expected = start.clone()
     for p, (i, j) in enumerate(pairs):
@@ -436,18 +437,18 @@ def test_pair_scatter_by_gemm_equals_index_add(batch, device, monkeypatch):
         expected[:, j] -= on_a[:, p]
     for got in results:
         torch.testing.assert_close(got, expected, rtol=1e-5, atol=1e-5)
-    assert physics.scatter_by_gemm(n, len(pairs), batch)
-    assert not physics.scatter_by_gemm(n, physics.GEMM_SCATTER_MAX_CELLS, batch), "too large for a dense matrix"
+    assert scatter.scatter_by_gemm(n, len(pairs), batch)
+    assert not scatter.scatter_by_gemm(n, scatter.GEMM_SCATTER_MAX_CELLS, batch), "too large for a dense matrix"
     # a few pairs over many envs: index_add_ (as fast, without the BLAS kernel's resident code); at a few envs the GEMM
-    few = physics.GEMM_SCATTER_MIN_PAIRS - 1
-    assert physics.scatter_by_gemm(n, few, batch) == (batch < physics.SCATTER_TRANSPOSE_BELOW)
+    few = scatter.GEMM_SCATTER_MIN_PAIRS - 1
+    assert scatter.scatter_by_gemm(n, few, batch) == (batch < scatter.SCATTER_TRANSPOSE_BELOW)
 
 
 def test_no_dense_incidence_beyond_the_gemm_cap(device):
     """Worlds with more (entity, pair) cells than a GEMM scatter may use build no dense incidence matrix
     (1,000 spheres once allocated 6 GB of them at the first step); small ones build theirs up front."""
-    from vmas_ros.simulator import physics
     from vmas_ros.simulator.core import Agent, Sphere, World
+    from vmas_ros.simulator.physics.thresholds import GEMM_SCATTER_MAX_CELLS
 
     def stepped(n):
         world = World(batch_dim=2, device=device)
@@ -458,7 +459,7 @@ def test_no_dense_incidence_beyond_the_gemm_cap(device):
         return world.tables.pairs[0]
 
     big = stepped(60)
-    assert 60 * len(big.index_a) > physics.GEMM_SCATTER_MAX_CELLS
+    assert 60 * len(big.index_a) > GEMM_SCATTER_MAX_CELLS
     assert not big.__dict__.get("_incidence")
     small = stepped(4)
     assert set(small.__dict__["_incidence"]) == {(4, torch.float32), ("opposite", 4, torch.float32)}

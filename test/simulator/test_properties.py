@@ -10,7 +10,7 @@ and contact margin over their valid ranges; optional joints) and actions
 anywhere in range, bounds included, and checks properties of every step.
 
 **The contact force bound.** Every collision kernel ends in
-``contacts.soft_contact``: a pair whose contact points are ``d`` apart pushes
+``physics.collision.contact.soft_contact``: a pair whose contact points are ``d`` apart pushes
 with magnitude ``c * k * log(1 + exp((d_min - d) / k))`` while
 ``1e-6 <= d <= d_min``, else 0 (``c`` = collision_force, ``k`` = contact_margin).
 As ``d >= 0`` and ``log(1 + exp(x)) <= max(x, 0) + log 2``, the magnitude is at
@@ -51,6 +51,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from vmas_ros.simulator import physics
+from vmas_ros.simulator.physics.collision import pair_forces
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.joints import Joint
 from vmas_ros.simulator.utils import JOINT_FORCE, LINE_MIN_DIST, TORQUE_CONSTRAINT_FORCE
@@ -263,7 +264,7 @@ def _check_pair_forces(world: World, step: int) -> None:
     state = physics.BodyState(*state_tensors(world))
     radius = torch.tensor([e.shape.circumscribed_radius() for e in world.entities])
     for pair in world.tables.pairs:
-        f_a, f_b, t_a, t_b = physics.pair_forces(pair, state, world._step_params())
+        f_a, f_b, t_a, t_b = pair_forces(pair, state, world._step_params())
         bound = pair_bounds(world, pair).view(-1, 1) * (1 + REL_TOL)
         for f in (f_a, f_b):
             norm = torch.linalg.vector_norm(f, dim=-1)

@@ -58,7 +58,7 @@ from vmas_ros.scenarios.flocking import (
     sample_clear_positions,
 )
 from vmas_ros.simulator.compiling import WorldKernel
-from vmas_ros.simulator.contacts import mask_ge, mask_lt
+from vmas_ros.simulator.masks import mask_ge, mask_lt
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.lidar_batch import AgentLidars

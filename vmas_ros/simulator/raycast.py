@@ -28,7 +28,7 @@ from typing import Optional, Tuple, Union
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator.contacts import mask_gt, mask_lt
+from vmas_ros.simulator.masks import mask_gt, mask_lt
 
 
 __all__ = ["ray_sphere", "ray_box", "ray_segment", "ray_sphere_xy", "ray_box_xy", "ray_segment_xy",

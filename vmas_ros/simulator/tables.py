@@ -12,12 +12,15 @@ from __future__ import annotations
 import math
 from functools import cached_property
 from dataclasses import dataclass, field
-from typing import Dict, List, Tuple
+from typing import TYPE_CHECKING, Dict, List, Optional, Tuple
 
 import torch
 from torch import Tensor
 
 from vmas_ros.simulator.shapes import Box, Line, Sphere
+
+if TYPE_CHECKING:
+    from vmas_ros.simulator.physics.constants import StepConstants
 
 #: collision kernels, keyed by the (first, second) shape kinds they take
 PAIR_KINDS: Tuple[Tuple[str, str], ...] = (
@@ -33,7 +36,7 @@ _KIND_ORDER = {"box": 0, "line": 1, "sphere": 2}
 
 def incidence(index: Tensor, n_entities: int, dtype: torch.dtype) -> Tensor:
     """``[N, P]`` 0/1 matrix with a 1 at (index[p], p): ``M @ values`` adds each pair's ``[P, B]`` value
-    onto its entity (a scatter as one GEMM; see physics.scatter_by_gemm)."""
+    onto its entity (a scatter as one GEMM; see physics.scatter.scatter_by_gemm)."""
     members = index.tolist()  # built once per layout, in Python: a few hundred cells at most (see physics)
     rows = [[1.0 if member == entity else 0.0 for member in members] for entity in range(n_entities)]
     return torch.tensor(rows, device=index.device, dtype=dtype).reshape(n_entities, len(members))
@@ -97,7 +100,7 @@ class JointTable(_Incidence):
     rotate: Tensor  # [J] bool
 
     def __post_init__(self) -> None:
-        # planar views for the step (contacts.joint_forces): anchor components [J, 1], lock as float 0/1
+        # planar views for the step (physics.joints): anchor components [J, 1], lock as float 0/1
         self.anchor_ax, self.anchor_ay = self.anchor_a[..., 0], self.anchor_a[..., 1]
         self.anchor_bx, self.anchor_by = self.anchor_b[..., 0], self.anchor_b[..., 1]
         self.locked = (~self.rotate).to(self.dist.dtype).reshape(-1, 1)
@@ -138,6 +141,10 @@ class WorldTables:
     limits_velocity: bool = True  # some finite v_range
     limits_force: bool = True  # some agent with finite max_f or f_range
     limits_torque: bool = True  # some agent with finite max_t or t_range
+    #: the physics' constants for these tables (physics.constants.step_constants fills it once)
+    step_constants: Optional["StepConstants"] = field(default=None, repr=False, compare=False)
+    #: whether some agent cannot move or turn (ActionInputs fills it once)
+    fixed_agents: Optional[bool] = field(default=None, repr=False, compare=False)
 
 
 def _value_or(value, default: float) -> float:

@@ -156,7 +156,7 @@ class TorchUtils:
     @staticmethod
     def clamp_with_norm(tensor: Tensor, max_norm: Union[float, Tensor]) -> Tensor:
         """Scale vectors whose norm exceeds ``max_norm`` back onto that norm."""
-        from vmas_ros.simulator.physics import clamp_norm
+        from vmas_ros.simulator.physics.forces import clamp_norm
 
         return clamp_norm(tensor, max_norm)
 

@@ -1,7 +1,7 @@
 """The world: owns the entities of a batch of envs and steps them together.
 
 Public API follows VMAS 1.5's ``World``. Internally a step runs
-:func:`vmas_ros.simulator.physics.step_planar` on the planar state of all
+:func:`vmas_ros.simulator.physics.pipeline.step` on the planar state of all
 entities, which the world's :class:`~vmas_ros.simulator.state_store.StateStore`
 keeps between steps; entities read their fields from it lazily, and the
 state is rebuilt from the entities only when one of them changed. Property
@@ -18,6 +18,7 @@ from torch import Tensor
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator import physics
+from vmas_ros.simulator.physics.pipeline import advance
 from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
 from vmas_ros.simulator.layout import split_xy_stacked, stack_into
@@ -33,7 +34,7 @@ from vmas_ros.simulator.utils import (
     LINEAR_FRICTION,
     TORQUE_CONSTRAINT_FORCE,
 )
-from vmas_ros.simulator.world_actions import ActionInputs, assemble_actions
+from vmas_ros.simulator.world_actions import ActionInputs
 from vmas_ros.simulator.world_state import StateAccess
 from vmas_ros.simulator.world_rays import RayQueries
 
@@ -41,19 +42,6 @@ __all__ = ["World"]
 
 #: shape-kind pairs a collision kernel exists for, each sorted by name
 _COLLIDABLE_KINDS = frozenset(tuple(sorted(kinds)) for kinds in PAIR_KINDS)
-
-
-def _advance(state: physics.PlanarState, tables: WorldTables, params: physics.StepParams, actions,
-             fixed_rotation: Optional[Tensor], kernels: tuple = ()) -> Tuple[physics.PlanarState, tuple]:
-    """The step as one function (what ``compile_physics`` compiles): the physics, then each state kernel.
-
-    ``actions`` is the ``[3, N, B]`` input, or the agents' (forces, torques) lists to assemble it from
-    (in the compiled graph, where that costs nothing; see ``ActionInputs``).
-    """
-    if isinstance(actions, tuple):
-        actions = assemble_actions(state.q, tables, *actions)
-    new = physics.step_planar(state, tables, params, actions, fixed_rotation, actions_writable=True)
-    return new, tuple(None if kernel is None else kernel(new.q, new.v) for kernel in kernels)
 
 
 def _stacked_planar(fields: List[List[Optional[Tensor]]], n: int, batch: int, device) -> physics.PlanarState:
@@ -142,8 +130,8 @@ class World(RayQueries, ActionInputs, StateAccess):
         self._xy_splits: Dict[str, Tuple[Tensor, Tensor]] = {}  # field -> (stack it was split from, [2, N, B])
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
-        #: the physics step function: physics.step, or a torch.compile'd copy (compile_physics)
-        self._physics_step = _advance
+        #: the step as one function: advance, or a torch.compile'd copy of it (compile_physics)
+        self._physics_step = advance
         self._compile_mode: Optional[str] = None
         #: pure functions of the new state a step evaluates with its physics (see add_state_kernel)
         self._state_kernels: List[Callable] = []
@@ -171,11 +159,10 @@ class World(RayQueries, ActionInputs, StateAccess):
         """Run the physics step through ``torch.compile`` (off by default).
 
         The step is a fixed sequence of batched kernels with no host reads, so
-        the compiler fuses it into a few loops: on a 2-core CPU, simple_spread at
-        30,000 envs and flocking at 10,000 step about 2.5-3x faster. The LIDAR's
-        ray kernels (``cast_rays``) are compiled too. The first
-        step compiles (about 5-30 s on a CPU, which needs a C++ compiler); a new
-        batch size or a change of entities compiles again. ``mode`` goes to
+        the compiler fuses it into a few loops (speed-ups in docs/bench/). The
+        LIDAR's ray kernels (``cast_rays``) are compiled too. The first step
+        compiles (seconds; a CPU needs a C++ compiler); a new batch size or a
+        change of entities compiles again. ``mode`` goes to
         ``torch.compile`` (e.g. ``"reduce-overhead"``: CUDA graphs on a GPU).
         Results equal the eager step to float rounding, not bit for bit: the
         compiler may reorder and fuse float ops, so parity with VMAS is only
@@ -183,18 +170,18 @@ class World(RayQueries, ActionInputs, StateAccess):
         """
         self._compile_mode = mode
         if not enabled:
-            self._physics_step = _advance
+            self._physics_step = advance
             self._ray_kernels = _EAGER_RAY_KERNELS
             return
         # one compiled copy per layout, checking only the state and the actions on each call (LayoutCompiled)
-        self._physics_step = LayoutCompiled(_advance, mode, key=_step_layout,
+        self._physics_step = LayoutCompiled(advance, mode, key=_step_layout,
                                             checked=("state.", "actions", "fixed_rotation"))
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
         self._ray_kernels = {kind: compile_for_world(fn, mode, arguments_only=True) for kind, fn in _EAGER_RAY_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
-        return self._physics_step is not _advance
+        return self._physics_step is not advance
 
     @property
     def compile_mode(self) -> Optional[str]:
@@ -350,8 +337,8 @@ class World(RayQueries, ActionInputs, StateAccess):
         # state kernels ride along in compiled steps only: eagerly, computing them when they are asked for
         # costs the same calls and keeps the step's own peak memory lower
         kernels = tuple(self._state_kernels) if self.physics_compiled else ()
-        if self._physics_step is _advance:
-            new, outputs = _advance(state, tables, params, actions, fixed_rotation, kernels)
+        if self._physics_step is advance:
+            new, outputs = advance(state, tables, params, actions, fixed_rotation, kernels)
         else:  # keyed on the tables object: rebuilt whenever an entity or one of its properties changes
             new, outputs = self._physics_step(tables, state, tables, params, actions, fixed_rotation, kernels)
         del actions, state

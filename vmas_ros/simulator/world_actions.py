@@ -2,7 +2,7 @@
 
 Each agent's dynamics writes ``agent.state.force`` ``[B, 2]`` and ``torque``
 ``[B, 1]``; the step wants one ``[3, N, B]`` tensor (fx, fy, torque per
-entity, zero for landmarks; see ``physics.stack_actions``), clamped to the
+entity, zero for landmarks; see ``physics.types.stack_actions``), clamped to the
 agents' limits as VMAS clamps them. Kept apart from the step itself: this is
 bookkeeping between the object API and the batched state, and at a few envs
 its call count matters more than its arithmetic.
@@ -14,8 +14,8 @@ from typing import Tuple
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator import physics
-from vmas_ros.simulator.layout import split_xy_into, stack_into
+from vmas_ros.simulator.physics.forces import clamp_norm
+from vmas_ros.simulator.physics.actions import assemble_actions
 from vmas_ros.simulator.tables import WorldTables
 
 
@@ -41,10 +41,10 @@ class ActionInputs:
         fixed = self._fixed_agents(tables)
         agent_force, agent_torque = torch.stack(forces), torch.stack(torques)
         if tables.limits_force:
-            agent_force = physics.clamp_norm(agent_force, tables.agent_max_f)
+            agent_force = clamp_norm(agent_force, tables.agent_max_f)
             agent_force = torch.maximum(torch.minimum(agent_force, tables.agent_f_range), -tables.agent_f_range)
         if tables.limits_torque:
-            agent_torque = physics.clamp_norm(agent_torque, tables.agent_max_t)
+            agent_torque = clamp_norm(agent_torque, tables.agent_max_t)
             agent_torque = torch.maximum(torch.minimum(agent_torque, tables.agent_t_range), -tables.agent_t_range)
         if tables.limits_force or tables.limits_torque:
             # clamped actions are visible to scenarios, as in VMAS
@@ -60,35 +60,6 @@ class ActionInputs:
 
     def _fixed_agents(self, tables: WorldTables) -> bool:
         """Whether some agent cannot move or rotate (its action force or torque is then ignored)."""
-        cached = getattr(tables, "_fixed_agents_cache", None)
-        if cached is None:
-            cached = tables._fixed_agents_cache = not all(a.movable and a.rotatable for a in self._agents)
-        return cached
-
-
-def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
-    """The step's action input ``[3, N, B]`` (fx, fy, torque per entity, zero for landmarks; see
-    physics.stack_actions) from the agents' forces ``[A, B, 2]`` and torques ``[A, B, 1]`` (stacks, or
-    lists of per-agent tensors). A fresh tensor: the physics adds contact forces into it.
-    """
-    actions = q.new_zeros(q.shape)
-    n_agents = tables.n_agents
-    if n_agents == 0:
-        return actions
-    rows = actions[:, tables.n_entities - n_agents:]  # the agents' [3, A, B] block (landmarks stay zero)
-    if isinstance(forces, (list, tuple)):
-        if not torch.compiler.is_compiling() and not physics._differentiable(*forces, *torques):
-            # each agent's force and torque stacked straight into its rows (no stacks of the batch)
-            stack_into(forces, rows[:2])
-            stack_into(torques, rows[2:])
-            return actions
-        forces, torques = torch.stack(forces), torch.stack(torques)
-    if q.numel() <= physics.SMALL_BATCH_ELEMENTS or torch.compiler.is_compiling():
-        # few elements: each call's fixed cost dominates; one strided copy (and the compiler's choice)
-        rows[:2].copy_(forces.permute(2, 0, 1))
-    else:
-        # many: the components copied straight into their rows (bit-exact, no batch-sized temporaries;
-        # a strided copy of interleaved pairs runs at a fraction of memory speed on the CPU)
-        split_xy_into(forces, rows[:2])
-    rows[2].copy_(torques[..., 0])
-    return actions
+        if tables.fixed_agents is None:
+            tables.fixed_agents = not all(a.movable and a.rotatable for a in self._agents)
+        return tables.fixed_agents

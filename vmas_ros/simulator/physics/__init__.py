@@ -1,0 +1,28 @@
+"""The batched physics step, one module per concern (VMAS's module path ``simulator.physics``).
+
+``pipeline.step(state, tables, params, actions, fixed_rotation)`` advances
+every env by ``dt`` and reads like the paper's equations:
+
+- ``types``: the step's data: ``PlanarState`` (``q``, ``v``: ``[3, N, B]``),
+  ``StepParams``;
+- ``constants``: per-entity constants as ``[3, N, 1]`` columns, built once
+  per layout (``StepConstants``);
+- ``forces``: action, friction and gravity forces;
+- ``joints``: joint springs and rotation locks;
+- ``collision``: one contact kernel per pair of shape kinds, found through a
+  table;
+- ``scatter``: adding per-pair forces onto entities;
+- ``integrator``: semi-implicit Euler, and how held entities stay still;
+- ``thresholds``: the sizes at which equivalent code paths switch, with why.
+
+``World.step`` (:mod:`vmas_ros.simulator.world`) calls the pipeline on the
+state it keeps, eagerly or through ``torch.compile``.
+"""
+from vmas_ros.simulator.physics.constants import StepConstants, step_constants
+from vmas_ros.simulator.physics.pipeline import step, step_vectors
+from vmas_ros.simulator.physics.types import BodyState, PlanarState, StepParams, stack_actions
+
+__all__ = [
+    "BodyState", "PlanarState", "StepConstants", "StepParams", "stack_actions", "step", "step_constants",
+    "step_vectors",
+]

@@ -1,0 +1,46 @@
+"""The physics step's action input: every entity's (fx, fy, torque) as one ``[3, N, B]`` tensor.
+
+Agents' dynamics write a force ``[B, 2]`` and a torque ``[B, 1]`` each; the
+step adds them to the entities' rows (landmarks get zeros). At a few envs the
+number of calls matters more than the arithmetic, so the copy is chosen by
+size (:mod:`.thresholds`).
+"""
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from vmas_ros.simulator.layout import split_xy_into, stack_into
+from vmas_ros.simulator.physics.integrator import differentiable
+from vmas_ros.simulator.physics.thresholds import SMALL_BATCH_ELEMENTS
+from vmas_ros.simulator.tables import WorldTables
+
+__all__ = ["assemble_actions"]
+
+
+def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
+    """The step's action input ``[3, N, B]`` (fx, fy, torque per entity, zero for landmarks; see
+    physics.types.stack_actions) from the agents' forces ``[A, B, 2]`` and torques ``[A, B, 1]`` (stacks, or
+    lists of per-agent tensors). A fresh tensor: the physics adds contact forces into it.
+    """
+    actions = q.new_zeros(q.shape)
+    n_agents = tables.n_agents
+    if n_agents == 0:
+        return actions
+    rows = actions[:, tables.n_entities - n_agents:]  # the agents' [3, A, B] block (landmarks stay zero)
+    if isinstance(forces, (list, tuple)):
+        if not torch.compiler.is_compiling() and not differentiable(*forces, *torques):
+            # each agent's force and torque stacked straight into its rows (no stacks of the batch)
+            stack_into(forces, rows[:2])
+            stack_into(torques, rows[2:])
+            return actions
+        forces, torques = torch.stack(forces), torch.stack(torques)
+    if q.numel() <= SMALL_BATCH_ELEMENTS or torch.compiler.is_compiling():
+        # few elements: each call's fixed cost dominates; one strided copy (and the compiler's choice)
+        rows[:2].copy_(forces.permute(2, 0, 1))
+    else:
+        # many: the components copied straight into their rows (bit-exact, no batch-sized temporaries;
+        # a strided copy of interleaved pairs runs at a fraction of memory speed on the CPU)
+        split_xy_into(forces, rows[:2])
+    rows[2].copy_(torques[..., 0])
+    return actions
