@@ -49,7 +49,7 @@ from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import LINE_MIN_DIST, Color, TorchUtils
+from vmas_ros.simulator.utils import Color, TorchUtils
 
 DEFAULTS = {"n_passages": 1, "fixed_passage": False, "random_start_angle": True}
 N_AGENTS = 2
@@ -85,11 +85,9 @@ def disc_box_overlaps(discs: Tensor, radius: float, boxes: Tensor, box_rot: Tens
     ``discs`` [B, n, 2], ``boxes`` [B, K, 2], ``box_rot`` [B, K] -> [B, n, K] bool:
     the disc touches the block's outline, or its centre is inside the block.
     """
-    point, centre, rot = discs.unsqueeze(2), boxes.unsqueeze(1), box_rot.unsqueeze(1)
-    closest = geo.closest_point_on_box_boundary(centre, rot, BLOCK_LENGTH, BLOCK_WIDTH, point)
-    inside = torch.linalg.vector_norm(point - centre, dim=-1) < torch.linalg.vector_norm(centre - closest, dim=-1)
-    touching = torch.linalg.vector_norm(point - closest, dim=-1) < radius + LINE_MIN_DIST
-    return inside | touching
+    return geo.disc_box_overlap(
+        boxes.unsqueeze(1), box_rot.unsqueeze(1), BLOCK_LENGTH, BLOCK_WIDTH, discs.unsqueeze(2), radius
+    )
 
 
 class Scenario(BaseScenario):

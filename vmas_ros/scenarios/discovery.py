@@ -50,12 +50,8 @@ from typing import Optional
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import read_kwargs
-from vmas_ros.scenarios.flocking import (
-    env_rows,
-    for_setter,
-    pairwise_distances,
-    sample_clear_positions,
+from vmas_ros.scenarios.common import (
+    for_index, pair_distances, range_links, read_kwargs, sample_clear_positions, selected_rows,
 )
 from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.masks import mask_ge, mask_lt
@@ -152,10 +148,10 @@ class Scenario(BaseScenario):
             self.all_time_covered[env_index] = False
         placed = self.targets + world.agents
         bounds = (-self.x_semidim, self.x_semidim), (-self.y_semidim, self.y_semidim)
-        none_yet = torch.zeros(env_rows(world, env_index), 0, world.dim_p, device=world.device)
+        none_yet = torch.zeros(selected_rows(world.batch_dim, env_index), 0, world.dim_p, device=world.device)
         positions = sample_clear_positions(none_yet, len(placed), self.min_dist_between_entities, *bounds)
         for k, entity in enumerate(placed):
-            entity.set_pos(for_setter(positions[:, k], env_index), batch_index=env_index)
+            entity.set_pos(for_index(positions[:, k], env_index), batch_index=env_index)
 
     # ------------------------------------------------------------------ reward
     def _stack(self, entities) -> Tensor:
@@ -237,13 +233,7 @@ class Scenario(BaseScenario):
             ring.set_color(*TARGET_COLOR.value)
             geoms.append(ring)
         # lines between agents within lidar range of each other (VMAS calls it the comms range)
-        pos = self._stack(self.world.agents)[env_index]
-        close = (pairwise_distances(pos.unsqueeze(0))[0] <= self.lidar_range).triu(diagonal=1)
-        for i, j in close.nonzero().tolist():
-            line = rendering.Line(tuple(pos[i].tolist()), tuple(pos[j].tolist()), width=1)
-            line.set_color(*Color.BLACK.value)
-            geoms.append(line)
-        return geoms
+        return geoms + range_links(self.world.agents, env_index, self.lidar_range)
 
 
 def reward_terms(
@@ -256,21 +246,14 @@ def reward_terms(
     function of tensors, run as a ``WorldKernel``.
     """
     tx, ty, ax, ay = x[:n_targets], y[:n_targets], x[n_targets:], y[n_targets:]
-    near = _distances(ax, ay, tx, ty) < covering_range  # [N, T, B]
+    near = pair_distances(ax, ay, tx, ty) < covering_range  # [N, T, B]
     covered = near.sum(dim=0) >= agents_per_target  # [T, B]
     covering = (near & covered).sum(dim=1).float() * covering_coeff  # [N, B]
     team = covering.sum(dim=0)
     shared = torch.where(team != 0, team / 2, team)  # halved, as in VMAS 1.5
-    gap = _distances(ax, ay, ax, ay) - 2 * AGENT_RADIUS  # [N, N, B]
+    gap = pair_distances(ax, ay, ax, ay) - 2 * AGENT_RADIUS  # [N, N, B]
     touching = (gap < COLLISION_DISTANCE) & not_self
     return covered, covering, shared, touching.sum(dim=1).float() * collision_penalty
-
-
-def _distances(ax: Tensor, ay: Tensor, bx: Tensor, by: Tensor) -> Tensor:
-    """Distances ``[I, J, B]`` between points ``(ax, ay)`` ``[I, B]`` and ``(bx, by)`` ``[J, B]``."""
-    dx, dy = ax.unsqueeze(1) - bx.unsqueeze(0), ay.unsqueeze(1) - by.unsqueeze(0)
-    # the floor keeps the root's gradient finite where two points coincide (an agent to itself)
-    return torch.addcmul(dx * dx, dy, dy).clamp_min(1e-30).sqrt()
 
 
 def respawn_clear(

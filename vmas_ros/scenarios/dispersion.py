@@ -31,14 +31,19 @@ from __future__ import annotations
 import torch
 
 from vmas_ros.scenarios import food as foodlib
-from vmas_ros.scenarios.common import for_index, selected_rows
+from vmas_ros.scenarios.common import for_index, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 AGENT_RADIUS = 0.035
 TIME_PENALTY = -0.01
+#: name -> default of every kwarg (``n_food`` None: one per agent)
+DEFAULTS = {
+    "n_agents": 4, "share_reward": False, "penalise_by_time": False, "food_radius": 0.05, "pos_range": 1.0,
+    "n_food": None,
+}
 
 
 def _positive_int(name: str, value) -> int:
@@ -64,13 +69,13 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        self.n_agents = _positive_int("n_agents", kwargs.pop("n_agents", 4))
-        self.share_reward = _flag("share_reward", kwargs.pop("share_reward", False))
-        self.penalise_by_time = _flag("penalise_by_time", kwargs.pop("penalise_by_time", False))
-        self.food_radius = _positive_float("food_radius", kwargs.pop("food_radius", 0.05))
-        self.pos_range = _positive_float("pos_range", kwargs.pop("pos_range", 1.0))
-        self.n_food = _positive_int("n_food", kwargs.pop("n_food", self.n_agents))
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
+        self.n_agents = _positive_int("n_agents", config["n_agents"])
+        self.share_reward = _flag("share_reward", config["share_reward"])
+        self.penalise_by_time = _flag("penalise_by_time", config["penalise_by_time"])
+        self.food_radius = _positive_float("food_radius", config["food_radius"])
+        self.pos_range = _positive_float("pos_range", config["pos_range"])
+        self.n_food = _positive_int("n_food", self.n_agents if config["n_food"] is None else config["n_food"])
 
         world = World(batch_dim, device, x_semidim=self.pos_range, y_semidim=self.pos_range)
         for i in range(self.n_agents):

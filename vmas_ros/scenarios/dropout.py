@@ -34,27 +34,27 @@ import math
 import torch
 
 from vmas_ros.scenarios import food as foodlib
-from vmas_ros.scenarios.common import for_index, selected_rows
+from vmas_ros.scenarios.common import for_index, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 AGENT_RADIUS = 0.05
 GOAL_RADIUS = 0.03
 SPAWN_GAP = AGENT_RADIUS + GOAL_RADIUS + 0.01
 SPAWN_BOUND = 1.0
-DEFAULT_ENERGY_COEFF = 0.02
+#: name -> default of every kwarg
+DEFAULTS = {"n_agents": 4, "energy_coeff": 0.02, "start_same_point": False}
 
 
 class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        self.n_agents = kwargs.pop("n_agents", 4)
-        self.energy_coeff = kwargs.pop("energy_coeff", DEFAULT_ENERGY_COEFF)
-        self.start_same_point = kwargs.pop("start_same_point", False)
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
+        self.n_agents, self.energy_coeff = config["n_agents"], config["energy_coeff"]
+        self.start_same_point = config["start_same_point"]
         if isinstance(self.n_agents, bool) or not isinstance(self.n_agents, int) or self.n_agents < 1:
             raise ValueError(f"dropout: n_agents must be an int >= 1, got {self.n_agents!r}")
         if isinstance(self.energy_coeff, bool) or not isinstance(self.energy_coeff, (int, float)) \

@@ -38,7 +38,7 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import read_kwargs
+from vmas_ros.scenarios.common import for_index, pair_distances, read_kwargs, sample_clear_positions, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.lidar_batch import AgentLidars
@@ -57,60 +57,6 @@ LIDAR_RANGE = 0.2
 DESIRED_DISTANCE = 0.1  # between agent centres, in the shaping term
 COLLISION_DISTANCE = 0.005  # surface gap at or below which two agents count as colliding
 TARGET_TURN_STEPS = 30.0  # steps per radian of the target's heading
-
-
-# ------------------------------------------------------------ shared helpers
-def env_rows(world: World, env_index) -> int:
-    """How many envs ``env_index`` selects (None: all, int: one, 1-D index tensor: its length)."""
-    if env_index is None:
-        return world.batch_dim
-    return 1 if isinstance(env_index, int) else len(env_index)
-
-
-def for_setter(values: Tensor, env_index) -> Tensor:
-    """``values`` ([rows, ...]) shaped for ``set_*(..., batch_index=env_index)`` (an int drops the row)."""
-    return values[0] if isinstance(env_index, int) else values
-
-
-def sample_clear_positions(
-    occupied: Tensor, count: int, min_dist: float, x_bounds: tuple[float, float], y_bounds: tuple[float, float],
-    candidates: int = 64,
-) -> Tensor:
-    """``count`` uniform positions per row ([rows, count, 2]), each ``min_dist`` clear of the others.
-
-    ``occupied`` ([rows, m, 2]) holds positions to keep clear of. Entities are
-    placed one after another; each draws ``candidates`` uniform points per row
-    at once and takes the first one clear of everything placed so far, which
-    is distributed exactly like rejection sampling, without a data-dependent
-    loop or host sync. If no candidate of a row is clear (only in a crowded
-    arena), that row takes its candidate farthest from the others.
-    """
-    rows, device = occupied.shape[0], occupied.device
-    # entity-major planar components [m, rows, 1]: the distances to everything placed are [m, rows,
-    # candidates] with the candidates contiguous, and the nearest is a reduction over the leading dim
-    # (a reduction over a small trailing dim, or a broadcast over a trailing dim of 2, is a slow path)
-    taken_x, taken_y = occupied[..., 0].T.unsqueeze(-1), occupied[..., 1].T.unsqueeze(-1)
-    picked = []
-    for _ in range(count):
-        draw_x = torch.empty(rows, candidates, device=device).uniform_(*x_bounds)
-        draw_y = torch.empty(rows, candidates, device=device).uniform_(*y_bounds)
-        if taken_x.shape[0]:
-            gap_x, gap_y = draw_x - taken_x, draw_y - taken_y
-            clearance = torch.addcmul(gap_x * gap_x, gap_y, gap_y).amin(dim=0)  # squared distances
-        else:
-            clearance = torch.full((rows, candidates), math.inf, device=device)
-        clear = clearance >= min_dist * min_dist
-        pick = torch.where(clear.any(dim=1), clear.int().argmax(dim=1), clearance.argmax(dim=1)).unsqueeze(1)
-        x, y = torch.gather(draw_x, 1, pick), torch.gather(draw_y, 1, pick)  # [rows, 1]
-        picked.append(torch.cat([x, y], dim=1))
-        taken_x = torch.cat([taken_x, x.unsqueeze(0)])
-        taken_y = torch.cat([taken_y, y.unsqueeze(0)])
-    return torch.stack(picked, dim=1) if picked else occupied.new_zeros(rows, 0, 2)
-
-
-def pairwise_distances(pos: Tensor) -> Tensor:
-    """Centre distances [B, n, n] between the points ``pos`` [B, n, 2]."""
-    return torch.linalg.vector_norm(pos.unsqueeze(2) - pos.unsqueeze(1), dim=-1)
 
 
 class Scenario(BaseScenario):
@@ -169,16 +115,16 @@ class Scenario(BaseScenario):
 
     def reset_world_at(self, env_index=None) -> None:
         world = self.world
-        rows = env_rows(world, env_index)
+        rows = selected_rows(world.batch_dim, env_index)
         target_pos = torch.zeros(rows, world.dim_p, device=world.device)
         target_pos[:, 1] = -ARENA
-        self.target.set_pos(for_setter(target_pos, env_index), batch_index=env_index)
+        self.target.set_pos(for_index(target_pos, env_index), batch_index=env_index)
         placed = world.landmarks + world.policy_agents
         positions = sample_clear_positions(
             target_pos.unsqueeze(1), len(placed), self.min_dist_between_entities, (-ARENA, ARENA), (-ARENA, ARENA),
         )
         for k, entity in enumerate(placed):
-            entity.set_pos(for_setter(positions[:, k], env_index), batch_index=env_index)
+            entity.set_pos(for_index(positions[:, k], env_index), batch_index=env_index)
 
         shaping = self._shaping(self._distances())
         if env_index is None:
@@ -194,9 +140,7 @@ class Scenario(BaseScenario):
         x, y = self.world.stacked_xy("pos")
         n = len(self.world.agents)  # agents are the last rows of the entity stack
         x, y = x[-n:], y[-n:]
-        dx, dy = x.unsqueeze(1) - x.unsqueeze(0), y.unsqueeze(1) - y.unsqueeze(0)
-        # the floor keeps the root's gradient finite on the diagonal (an agent to itself), as a norm's is
-        return torch.addcmul(dx * dx, dy, dy).clamp_min(1e-30).sqrt()
+        return pair_distances(x, y, x, y)
 
     def _shaping(self, dist: Tensor) -> Tensor:
         """Each policy agent's mean squared deviation from ``DESIRED_DISTANCE`` to the others, [n_agents, B]."""

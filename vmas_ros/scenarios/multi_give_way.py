@@ -47,7 +47,7 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.common import heuristic_kwargs, range_links, read_kwargs
 from vmas_ros.scenarios.give_way import PID_PARAMS, VelocityController, Wall, track_velocity
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -229,18 +229,7 @@ class Scenario(BaseScenario):
 
     def extra_render(self, env_index: int = 0) -> list:
         """A black line between every two agents closer than ``comms_range``."""
-        from vmas_ros.simulator import rendering
-
-        geoms = []
-        agents = self.world.agents
-        for i, first in enumerate(agents):
-            for second in agents[i + 1:]:
-                a, b = first.state.pos[env_index], second.state.pos[env_index]
-                if float(torch.linalg.vector_norm(a - b)) <= self.comms_range:
-                    line = rendering.Line(a.tolist(), b.tolist(), width=1)
-                    line.set_color(*Color.BLACK.value)
-                    geoms.append(line)
-        return geoms
+        return range_links(self.world.agents, env_index, self.comms_range)
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):

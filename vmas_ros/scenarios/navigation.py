@@ -60,13 +60,13 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import heuristic_kwargs, range_links, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
-from vmas_ros.simulator.utils import Color, ScenarioUtils, TorchUtils
+from vmas_ros.simulator.utils import ScenarioUtils, TorchUtils
 
 #: name -> default of every kwarg (the heuristic reads the ones that shape the observation)
 DEFAULTS = {
@@ -282,16 +282,7 @@ class Scenario(BaseScenario):
 
     def extra_render(self, env_index: int = 0) -> list:
         """Black lines between agents within ``comms_range`` of each other."""
-        from vmas_ros.simulator import rendering
-
-        pos = torch.stack([a.state.pos[env_index] for a in self.world.agents])  # [n, 2]
-        close = (torch.cdist(pos, pos) <= self.comms_range).triu(diagonal=1)
-        geoms = []
-        for i, j in close.nonzero().tolist():
-            line = rendering.Line(tuple(pos[i].tolist()), tuple(pos[j].tolist()), width=1)
-            line.set_color(*Color.BLACK.value)
-            geoms.append(line)
-        return geoms
+        return range_links(self.world.agents, env_index, self.comms_range)
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):

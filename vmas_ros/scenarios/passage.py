@@ -38,12 +38,12 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, selected_rows
+from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import LINE_MIN_DIST, Color, ScenarioUtils, TorchUtils
+from vmas_ros.simulator.utils import Color, TorchUtils
 
 DEFAULTS = {"n_passages": 1, "shared_reward": False}
 N_AGENTS = 5
@@ -77,9 +77,8 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        self.n_passages = kwargs.pop("n_passages", DEFAULTS["n_passages"])
-        self.shared_reward = kwargs.pop("shared_reward", DEFAULTS["shared_reward"])
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
+        self.n_passages, self.shared_reward = config["n_passages"], config["shared_reward"]
         if not isinstance(self.n_passages, int) or not 1 <= self.n_passages <= N_BLOCKS:
             raise ValueError(f"passage: n_passages must be an int in [1, {N_BLOCKS}], got {self.n_passages!r}")
         self.visualize_semidims = False  # extra_render draws the walls
@@ -148,12 +147,9 @@ class Scenario(BaseScenario):
         solid = [b for b in self.blocks if b.collide]
         blocks = self._stack(solid).unsqueeze(1)  # [B, 1, K, 2]
         rot = torch.stack([b.state.rot[:, 0] for b in solid], dim=1).unsqueeze(1)
-        point = pos.unsqueeze(2)  # [B, 5, 1, 2]
-        closest = geo.closest_point_on_box_boundary(blocks, rot, BLOCK_LENGTH, BLOCK_WIDTH, point)
         # as World.is_overlapping: touching the outline, or inside the solid box
-        inside = torch.linalg.vector_norm(point - blocks, dim=-1) < torch.linalg.vector_norm(blocks - closest, dim=-1)
-        touching = torch.linalg.vector_norm(point - closest, dim=-1) < AGENT_RADIUS + LINE_MIN_DIST
-        return agents + (inside | touching).sum(dim=-1)
+        overlapping = geo.disc_box_overlap(blocks, rot, BLOCK_LENGTH, BLOCK_WIDTH, pos.unsqueeze(2), AGENT_RADIUS)
+        return agents + overlapping.sum(dim=-1)
 
     def _all_rewards(self) -> Tensor:
         """Every agent's reward [B, 5]; caches the terms ``info`` reports."""

@@ -56,7 +56,7 @@ from numbers import Real
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import for_index, heuristic_kwargs, range_links, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.lidar_batch import AgentLidars
@@ -277,14 +277,7 @@ class Scenario(BaseScenario):
             return self.probe(pos, normalise=True, envs=slice(env_index, env_index + 1))[0][0]
 
         geoms = [rendering.render_function_util(unspent, plot_range=(self.xdim, self.ydim), cmap_alpha=0.5)]
-        agents = self.world.agents
-        for i, first in enumerate(agents):
-            for second in agents[i + 1:]:
-                a, b = first.state.pos[env_index], second.state.pos[env_index]
-                if float(torch.linalg.vector_norm(a - b)) <= self.comms_range:
-                    link = rendering.Line(a.tolist(), b.tolist(), width=1)
-                    link.set_color(*Color.BLACK.value)
-                    geoms.append(link)
+        geoms += range_links(self.world.agents, env_index, self.comms_range)
         x, y = self.xdim, self.ydim
         walls = rendering.make_polygon([(-x, -y), (x, -y), (x, y), (-x, y)], filled=False)
         walls.set_color(*Color.BLACK.value)

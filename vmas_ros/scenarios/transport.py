@@ -43,7 +43,7 @@ from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.layout import join_xy
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import LINE_MIN_DIST, Color
+from vmas_ros.simulator.utils import Color
 
 AGENT_RADIUS = 0.03
 AGENT_U_MULTIPLIER = 0.6
@@ -127,14 +127,7 @@ class Scenario(BaseScenario):
         return torch.stack([p.state.pos for p in self.packages], dim=1)  # [B, P, 2]
 
     def _package_status(self):
-        """Each package's distance to the goal and whether it overlaps it, both [B, P].
-
-        All packages at once on planar rows (``World.stacked_xy``), with the box
-        boundary found in the box frame: the same test as
-        ``World.is_overlapping`` (the goal's centre closer to the package's than
-        the boundary point nearest it, or that point within the goal's reach),
-        equal to float rounding, in a fraction of the passes.
-        """
+        """Each package's distance to the goal and whether it overlaps it, both [B, P] (see :func:`package_status`)."""
         distance, on_goal, _ = self._outputs()
         return distance, on_goal
 
@@ -191,20 +184,17 @@ class Scenario(BaseScenario):
 def package_status(q: torch.Tensor, n_packages: int, length: float, width: float) -> tuple:
     """Each package's distance to the goal and whether it overlaps it, both ``[B, P]``, from the planar state.
 
-    ``q`` ``[3, N, B]`` with the goal first, then the packages. The box
-    boundary is found in the box frame: the same test as
-    ``World.is_overlapping`` (the goal's centre closer to the package's than
-    the boundary point nearest it, or that point within the goal's reach),
-    equal to float rounding, in a fraction of the passes. A pure function of
-    tensors (run as a ``WorldKernel``).
+    ``q`` ``[3, N, B]`` with the goal first, then the packages. The test of
+    ``World.is_overlapping`` (``geometry.disc_box_overlap_xy``) with the box
+    boundary found in the box frame: equal to float rounding, in a fraction of
+    the passes. A pure function of tensors (run as a ``WorldKernel``).
     """
     px, py, rot = q[0, 1 : 1 + n_packages], q[1, 1 : 1 + n_packages], q[2, 1 : 1 + n_packages]
     gx, gy = q[0, :1], q[1, :1]
-    distance = _hypot(px - gx, py - gy)
-    qx, qy = geo.closest_point_on_box_boundary_in_frame(px, py, rot, px.new_tensor(length), px.new_tensor(width), gx, gy)
-    inside = distance < _hypot(px - qx, py - qy)
-    touching = _hypot(gx - qx, gy - qy) < GOAL_RADIUS + LINE_MIN_DIST
-    return distance.T, (inside | touching).T
+    distance, on_goal = geo.disc_box_overlap_xy(
+        px, py, rot, px.new_tensor(length), px.new_tensor(width), gx, gy, GOAL_RADIUS, exact=False
+    )
+    return distance.T, on_goal.T
 
 
 def state_outputs(q: torch.Tensor, v: torch.Tensor, n_packages: int, length: float, width: float) -> tuple:
@@ -254,10 +244,6 @@ def _observations_by_cat(pos: torch.Tensor, vel: torch.Tensor, on_goal: torch.Te
     delivered = on_goal.to(pos.dtype).unsqueeze(-1).unsqueeze(0).expand(*per_package, 1)
     blocks = torch.cat([from_goal, from_agent, package_vel, delivered], dim=-1)  # [A, B, P, 7]
     return torch.cat([own, blocks.flatten(2)], dim=-1)
-
-
-def _hypot(dx: torch.Tensor, dy: torch.Tensor) -> torch.Tensor:
-    return torch.addcmul(dx * dx, dy, dy).sqrt_()
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):

@@ -26,6 +26,8 @@ from typing import List, Sequence, Tuple, Union
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.utils import LINE_MIN_DIST
+
 __all__ = [
     "rotate",
     "dot2",
@@ -43,6 +45,8 @@ __all__ = [
     "solid_box_inner_point",
     "point_segment_distance",
     "point_box_distance",
+    "disc_box_overlap",
+    "disc_box_overlap_xy",
 ]
 
 Scalar = Union[Tensor, float]
@@ -441,3 +445,38 @@ def point_box_distance(
     """Euclidean distance ``[...]`` from ``point`` to the box outline."""
     nearest = closest_point_on_box_boundary(center, rot, length, width, point)
     return torch.linalg.vector_norm(point - nearest, dim=-1)
+
+
+def disc_box_overlap_xy(
+    cx: Tensor, cy: Tensor, rot: Tensor, length: Scalar, width: Scalar, px: Tensor, py: Tensor, radius: float,
+    exact: bool = True,
+) -> Tuple[Tensor, Tensor]:
+    """``(centre distance, overlapping)`` of a disc at ``(px, py)`` and a solid box, on x/y components.
+
+    The disc overlaps the box when its centre is inside the box (closer to
+    the box's centre than the outline point nearest it) or when that outline
+    point is within ``radius + LINE_MIN_DIST`` of its centre: VMAS 1.5's test.
+    ``exact``: the outline point and lengths round as VMAS's do
+    (:func:`closest_point_on_box_boundary_xy`, :func:`norm_xy`); otherwise the
+    box-frame search and :func:`hypot_xy`, equal to float rounding in far
+    fewer passes (``length``/``width`` then tensors). Inputs broadcast.
+    """
+    closest = closest_point_on_box_boundary_xy if exact else closest_point_on_box_boundary_in_frame
+    length_of = norm_xy if exact else hypot_xy
+    qx, qy = closest(cx, cy, rot, length, width, px, py)
+    distance = length_of(px - cx, py - cy)
+    inside = distance < length_of(cx - qx, cy - qy)
+    touching = length_of(px - qx, py - qy) < radius + LINE_MIN_DIST
+    return distance, inside | touching
+
+
+def disc_box_overlap(center: Tensor, rot: Scalar, length: Scalar, width: Scalar, disc: Tensor, radius: float) -> Tensor:
+    """Does the disc at ``disc`` ``[..., 2]`` overlap the solid box? Bool ``[...]``, VMAS's rounding.
+
+    :func:`disc_box_overlap_xy` on ``[..., 2]`` points; inputs broadcast.
+    """
+    (center, disc), (rot, length, width) = _broadcast((center, disc), (rot, length, width))
+    _, overlapping = disc_box_overlap_xy(
+        center[..., 0], center[..., 1], rot, length, width, disc[..., 0], disc[..., 1], radius
+    )
+    return overlapping

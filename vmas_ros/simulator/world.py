@@ -463,12 +463,9 @@ class World(RayQueries, ActionInputs, StateAccess):
         """Bool per env: do the two shapes touch (a sphere inside a solid box counts)?"""
         if {entity_a.shape.kind, entity_b.shape.kind} == {"box", "sphere"}:
             box, sphere = (entity_a, entity_b) if entity_a.shape.kind == "box" else (entity_b, entity_a)
-            closest = geo.closest_point_on_box_boundary(
-                box.state.pos, box.state.rot[..., 0], box.shape.length, box.shape.width, sphere.state.pos
+            overlapping = geo.disc_box_overlap(
+                box.state.pos, box.state.rot[..., 0], box.shape.length, box.shape.width, sphere.state.pos,
+                sphere.shape.radius,
             )
-            inside = torch.linalg.vector_norm(sphere.state.pos - box.state.pos, dim=-1) < torch.linalg.vector_norm(
-                box.state.pos - closest, dim=-1
-            )
-            touching = torch.linalg.vector_norm(sphere.state.pos - closest, dim=-1) < sphere.shape.radius + LINE_MIN_DIST
-            return self._pick(inside | touching, env_index)
+            return self._pick(overlapping, env_index)
         return self.get_distance(entity_a, entity_b, env_index) < 0

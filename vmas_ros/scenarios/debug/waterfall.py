@@ -24,24 +24,26 @@ import math
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.joints import Joint
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 AGENT_RADIUS = 0.04
 ROD_LENGTH = 0.1
 N_BOXES = 5
+#: name -> default of every kwarg
+DEFAULTS = {"n_agents": 5, "joints": True}
 
 
 class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        self.n_agents = kwargs.pop("n_agents", 5)
-        self.with_joints = kwargs.pop("joints", True)
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
+        self.n_agents, self.with_joints = config["n_agents"], config["joints"]
         if not isinstance(self.n_agents, int) or self.n_agents < 1:
             raise ValueError(f"waterfall: n_agents must be a positive int, got {self.n_agents!r}")
         world = World(batch_dim, device, dt=0.1, drag=0.25, substeps=5, collision_force=500)

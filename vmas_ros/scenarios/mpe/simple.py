@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
 
 
 def uniform_positions(world: World, env_index, low: float, high: float) -> torch.Tensor:
@@ -40,7 +41,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        read_kwargs(kwargs, {})  # no kwargs: any given one warns, naming it
         world = World(batch_dim=batch_dim, device=device)
         world.add_agent(Agent(name="agent_0", collide=False, color=Color.GRAY))
         world.add_landmark(Landmark(name="landmark 0", collide=False, color=Color.RED))

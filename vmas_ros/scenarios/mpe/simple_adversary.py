@@ -29,10 +29,14 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import greedy_first_match, read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
+
+#: name -> default of every kwarg
+DEFAULTS = {"n_agents": 3, "n_adversaries": 1}
 
 AGENT_RADIUS = 0.15
 LANDMARK_RADIUS = 0.08
@@ -56,9 +60,8 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        n_agents = kwargs.pop("n_agents", 3)
-        n_adversaries = kwargs.pop("n_adversaries", 1)
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
+        n_agents, n_adversaries = config["n_agents"], config["n_adversaries"]
         if not isinstance(n_agents, int) or not isinstance(n_adversaries, int) or not 1 <= n_adversaries < n_agents:
             raise ValueError(
                 f"simple_adversary: need ints with 1 <= n_adversaries < n_agents, "
@@ -163,12 +166,5 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         team = torch.cat([torch.zeros(batch, 1, 2, device=landmarks.device), teammates], dim=1)  # self first
         dist = torch.cdist(team, landmarks)  # [B, G, L]
         dist = dist - 1e3 * torch.nn.functional.one_hot(goal, n).unsqueeze(1)  # goal pairs first
-        big = torch.finfo(dist.dtype).max
-        mine = torch.full((batch,), -1, dtype=torch.long, device=landmarks.device)
-        for _ in range(min(team.shape[1], n)):
-            flat = dist.flatten(1).argmin(dim=1)
-            a, l = flat // n, flat % n
-            mine = torch.where((a == 0) & (mine < 0), l, mine)
-            dist = dist.scatter(1, a.view(-1, 1, 1).expand(-1, 1, n), big)
-            dist = dist.scatter(2, l.view(-1, 1, 1).expand(-1, dist.shape[1], 1), big)
+        mine = greedy_first_match(dist)
         return torch.where(mine < 0, goal, mine)

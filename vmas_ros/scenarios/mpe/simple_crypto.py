@@ -30,10 +30,14 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
+
+#: name -> default of every kwarg
+DEFAULTS = {"dim_c": 4}
 
 #: (name, colour, adversary) in world order: Eve, Bob, Alice (as MPE and VMAS)
 ROLES = (("eve_0", Color.RED, True), ("bob_0", Color.BLUE, False), ("alice_0", Color.GREEN, False))
@@ -55,8 +59,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        dim_c = kwargs.pop("dim_c", 4)
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        dim_c = read_kwargs(kwargs, DEFAULTS)["dim_c"]
         if isinstance(dim_c, bool) or not isinstance(dim_c, int) or dim_c < 1:
             raise ValueError(f"simple_crypto: dim_c must be a positive int, got {dim_c!r}")
         world = World(batch_dim=batch_dim, device=device, dim_c=dim_c)

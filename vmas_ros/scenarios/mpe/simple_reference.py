@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import ScenarioUtils
 
 DIM_C = 10
 #: landmark colours, one row per landmark (red, green, blue)
@@ -51,7 +51,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        read_kwargs(kwargs, {})  # no kwargs: any given one warns, naming it
         world = World(batch_dim=batch_dim, device=device, dim_c=DIM_C)
         for i in range(2):
             world.add_agent(Agent(name=f"agent_{i}", collide=False, silent=False, color=AGENT_GRAY))

@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import ScenarioUtils
 
 DIM_C = 3
 AGENT_RADIUS = 0.075
@@ -59,7 +59,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        read_kwargs(kwargs, {})  # no kwargs: any given one warns, naming it
         world = World(batch_dim=batch_dim, device=device, dim_c=DIM_C)
         self.speaker = Agent(
             name="speaker_0", collide=False, movable=False, silent=False,

@@ -22,11 +22,15 @@ from __future__ import annotations
 
 import torch
 
+from vmas_ros.scenarios.common import greedy_first_match, read_kwargs
 from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.simulator.utils import Color, ScenarioUtils
+from vmas_ros.simulator.utils import Color
+
+#: name -> default of every kwarg
+DEFAULTS = {"n_agents": 3, "obs_agents": True}
 
 AGENT_RADIUS = 0.15
 #: below this many envs, the reward and observations take the formulation with fewer calls (each
@@ -39,9 +43,8 @@ class Scenario(BaseScenario):
     fresh_observations = True  # computed afresh per collection (few envs: views of one result), never written to
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        n_agents = kwargs.pop("n_agents", 3)
-        self.obs_agents = kwargs.pop("obs_agents", True)
-        ScenarioUtils.check_kwargs_consumed(kwargs)
+        config = read_kwargs(kwargs, DEFAULTS)
+        n_agents, self.obs_agents = config["n_agents"], config["obs_agents"]
         if not isinstance(n_agents, int) or n_agents < 1:
             raise ValueError(f"simple_spread: n_agents must be a positive int, got {n_agents!r}")
         world = World(batch_dim=batch_dim, device=device)
@@ -263,15 +266,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         landmarks = observation[:, 4:4 + 2 * n].view(batch, n, 2)
         others = observation[:, 4 + 2 * n:].view(batch, -1, 2)
         agents = torch.cat([torch.zeros(batch, 1, 2, device=observation.device), others], dim=1)  # self first
-        dist = torch.cdist(agents, landmarks)  # [B, A, L]
-        mine = torch.full((batch,), -1, dtype=torch.long, device=observation.device)
-        big = torch.finfo(dist.dtype).max
-        for _ in range(min(agents.shape[1], n)):
-            flat = dist.flatten(1).argmin(dim=1)
-            a, l = flat // n, flat % n
-            mine = torch.where((a == 0) & (mine < 0), l, mine)
-            dist = dist.scatter(1, a.view(-1, 1, 1).expand(-1, 1, n), big)
-            dist = dist.scatter(2, l.view(-1, 1, 1).expand(-1, dist.shape[1], 1), big)
+        mine = greedy_first_match(torch.cdist(agents, landmarks))  # from the distances [B, A, L]
         mine = torch.where(mine < 0, 0, mine)
         target = landmarks[torch.arange(batch, device=observation.device), mine]
         action = self.gain * target - self.damping * vel
