@@ -42,17 +42,15 @@ def _parse_kwargs(text: Optional[str]) -> dict:
 
 
 def _rollout(env, policy, steps: int, progress: bool) -> torch.Tensor:
-    """Mean per-env return of the first agent's team reward over ``steps`` steps."""
+    """Per-env return ``[B]`` of the agents' mean reward over ``steps`` steps (``policy`` None: random actions)."""
     from tqdm import tqdm
+
+    from vmas_ros.simulator.heuristic_policy import heuristic_actions
 
     obs = env.reset()
     total = torch.zeros(env.num_envs, device=env.device)
     for _ in tqdm(range(steps), disable=not progress, desc="steps", leave=False):
-        if policy is None:
-            actions = env.get_random_actions()
-        else:
-            actions = [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents)]
-        obs, rews, _, _ = env.step(actions)
+        obs, rews, _, _ = env.step(heuristic_actions(policy, env, obs))
         total += torch.stack(rews, dim=0).mean(dim=0)
     return total
 
@@ -104,6 +102,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     import vmas_ros
     from vmas_ros.scenarios import make_heuristic
+    from vmas_ros.simulator.heuristic_policy import heuristic_actions
     from vmas_ros.viz.video import VIDEO_SUFFIXES, save_frames
 
     out = Path(args.out)
@@ -128,11 +127,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     frames = [frame()]
     for _ in tqdm(range(args.steps), desc=f"render {args.scenario}", disable=args.quiet):
-        if policy is None:
-            actions = env.get_random_actions()
-        else:
-            actions = [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents)]
-        obs, _, _, _ = env.step(actions)
+        obs, _, _, _ = env.step(heuristic_actions(policy, env, obs))
         frames.append(frame())
     out.parent.mkdir(parents=True, exist_ok=True)
     save_frames(frames, out, fps=args.fps)
@@ -180,61 +175,60 @@ def cmd_drive(args: argparse.Namespace) -> int:
     return drive(args.agent, args.vx, args.vy, args.wz, args.seconds)
 
 
+def _add_rollout_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every rollout command takes: which scenario, how long, where and with which seed."""
+    parser.add_argument("--scenario", default="simple_spread", help="scenario name (see `vmas-ros list`)")
+    parser.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")
+    parser.add_argument("--steps", type=int, default=100, help="steps to roll out (default 100)")
+    parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    parser.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_delegated(sub, name: str, help_text: str, add_arguments, run) -> None:
+    """Subcommand ``name`` whose options (``add_arguments(parser)``) and handler (``run``) live in its own module."""
+    parser = sub.add_parser(name, help=help_text)
+    add_arguments(parser)
+    parser.set_defaults(func=run)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="vmas-ros", description="Vectorized multi-robot simulation for ROS 2.")
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="list the scenarios").set_defaults(func=cmd_list)
     demo = sub.add_parser("demo", help="short headless run of a scenario's heuristic")
-    demo.add_argument("--scenario", default="simple_spread", help="scenario name (see `vmas-ros list`)")
-    demo.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")
+    _add_rollout_arguments(demo)
     demo.add_argument("--num-envs", type=int, default=256, help="parallel envs (default 256)")
-    demo.add_argument("--steps", type=int, default=100, help="steps per rollout (default 100)")
-    demo.add_argument("--device", default="cpu", help="torch device (default cpu)")
-    demo.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     demo.add_argument("--image", default=None, help="save a PNG of env 0 at the end")
-    demo.add_argument("--quiet", action="store_true", help="no progress bar")
     demo.set_defaults(func=cmd_demo)
     from vmas_ros.viz.interactive import add_play_arguments, run_play_command
 
-    play = sub.add_parser("play", help="drive agents with the keyboard in a pygame window")
-    add_play_arguments(play)
-    play.set_defaults(func=run_play_command)
+    _add_delegated(sub, "play", "drive agents with the keyboard in a pygame window",
+                   add_play_arguments, run_play_command)
     from vmas_ros.bench.mpe import add_bench_arguments, run_bench_command
 
-    bench = sub.add_parser("bench", help="benchmarks (mpe: the VMAS paper's Figure 2, against VMAS and MPE)")
-    add_bench_arguments(bench)
-    bench.set_defaults(func=run_bench_command)
+    _add_delegated(sub, "bench", "benchmarks (mpe: the VMAS paper's Figure 2, against VMAS and MPE)",
+                   add_bench_arguments, run_bench_command)
     from vmas_ros.bench.heuristics import add_evaluate_arguments, run_evaluate_command
 
-    evaluate = sub.add_parser("evaluate", help="every scenario's heuristic against random play: episode returns")
-    add_evaluate_arguments(evaluate)
-    evaluate.set_defaults(func=run_evaluate_command)
+    _add_delegated(sub, "evaluate", "every scenario's heuristic against random play: episode returns",
+                   add_evaluate_arguments, run_evaluate_command)
     from vmas_ros.train.cli import add_export_arguments, add_train_arguments, run_export_command, run_train_command
 
-    train = sub.add_parser("train", help="train a policy (cppo, mappo, ippo, hetippo) and export it to ONNX")
-    add_train_arguments(train)
-    train.set_defaults(func=run_train_command)
+    _add_delegated(sub, "train", "train a policy (cppo, mappo, ippo, hetippo) and export it to ONNX",
+                   add_train_arguments, run_train_command)
     from vmas_ros.train.suite import add_train_suite_arguments, run_train_suite_command
 
-    train_suite = sub.add_parser("train-suite", help="the paper's Figure 3: train cppo, mappo, ippo, hetippo "
-                                 "on several scenarios and plot them against the heuristics")
-    add_train_suite_arguments(train_suite)
-    train_suite.set_defaults(func=run_train_suite_command)
-    export = sub.add_parser(
-        "export", help="export a training checkpoint or a BenchMARL run as <stem>.onnx + <stem>.json")
-    add_export_arguments(export)
-    export.set_defaults(func=run_export_command)
+    _add_delegated(sub, "train-suite", "the paper's Figure 3: train cppo, mappo, ippo, hetippo on several scenarios "
+                   "and plot them against the heuristics", add_train_suite_arguments, run_train_suite_command)
+    _add_delegated(sub, "export", "export a training checkpoint or a BenchMARL run as <stem>.onnx + <stem>.json",
+                   add_export_arguments, run_export_command)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
-    render.add_argument("--scenario", default="simple_spread", help="scenario name")
-    render.add_argument("--scenario-kwargs", default=None, help="JSON object of scenario kwargs")
-    render.add_argument("--steps", type=int, default=100, help="steps to roll out (default 100)")
+    _add_rollout_arguments(render)
     render.add_argument("--out", required=True, help="output file: .gif, .mp4 (needs imageio-ffmpeg) or .png (last frame)")
     render.add_argument("--random", action="store_true", help="random actions instead of the heuristic")
     render.add_argument("--size", type=int, default=0, help="output width in pixels (default: the scenario's)")
     render.add_argument("--fps", type=int, default=10, help="frames per second (default 10)")
-    render.add_argument("--device", default="cpu", help="torch device (default cpu)")
-    render.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    render.add_argument("--quiet", action="store_true", help="no progress bar")
     render.set_defaults(func=cmd_render)
     sim = sub.add_parser("sim", help="start sim_node (ROS 2) without ros2 launch")
     sim.add_argument("--config", default=None, help="ROS parameter file (e.g. config/simple_spread.yaml)")

@@ -37,6 +37,8 @@ from typing import Dict, List, Optional, Sequence
 
 import torch
 
+from vmas_ros.simulator.heuristic_policy import heuristic_actions
+
 __all__ = ["Evaluation", "add_evaluate_arguments", "episode_returns", "evaluate_scenario", "run_evaluate_command", "team_of"]
 
 _TEAM_SUFFIX = re.compile(r"[ _]\d+$")
@@ -79,11 +81,7 @@ def episode_returns(env, policy, max_steps: int, progress=None, on_step=None) ->
     running = torch.ones(env.num_envs, dtype=torch.bool, device=env.device)
     length = torch.zeros(env.num_envs, device=env.device)
     for _ in range(max_steps):
-        if policy is None:
-            actions = env.get_random_actions()
-        else:
-            actions = [policy.compute_action(o, u_range=a.u_range) for o, a in zip(obs, env.agents)]
-        obs, rews, dones, _ = env.step(actions)
+        obs, rews, dones, _ = env.step(heuristic_actions(policy, env, obs))
         returns += torch.stack(rews) * running
         length += running
         if on_step is not None:

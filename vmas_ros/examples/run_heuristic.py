@@ -5,7 +5,7 @@ from typing import Type
 import torch
 
 from vmas_ros import make_env
-from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy, RandomPolicy
+from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy, RandomPolicy, heuristic_actions
 from vmas_ros.simulator.utils import save_video
 
 
@@ -29,8 +29,7 @@ def run_heuristic(
     frames, total = [], 0.0
     start = time.time()
     for _ in range(n_steps):
-        actions = [policy.compute_action(o, u_range=agent.u_range) for o, agent in zip(obs, env.agents)]
-        obs, rews, dones, _ = env.step(actions)
+        obs, rews, dones, _ = env.step(heuristic_actions(policy, env, obs))
         total += float(torch.stack(rews, dim=1).mean())  # mean over agents, then over envs
         if render:
             frames.append(env.render(mode="rgb_array", agent_index_focus=None, visualize_when_rgb=True))
