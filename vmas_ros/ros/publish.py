@@ -29,12 +29,8 @@ from builtin_interfaces.msg import Time
 
 from vmas_ros.ros import convert
 from vmas_ros.ros.cdr import serialize_zeroed
+from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.topic_audit import quiet_publisher_events
-
-
-def type_name(message_type) -> str:
-    """``pkg/msg/Name`` of a message class (e.g. sensor_msgs/msg/LaserScan)."""
-    return f"{message_type.__module__.split('.')[0]}/msg/{message_type.__name__}"
 
 
 def _resolve(message, path: str) -> Tuple[object, str]:

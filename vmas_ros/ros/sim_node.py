@@ -37,6 +37,7 @@ import vmas_ros
 from vmas_ros.ros import convert
 from vmas_ros.ros.command import CommandGate, command_to_action
 from vmas_ros.ros.lifecycle import ConfigError
+from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, run_checked, unknown_parameters, validate
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
 from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
@@ -44,6 +45,7 @@ from vmas_ros.ros.ride_along import RideAlongSnapshot
 from vmas_ros.ros.stepping import StepLoop
 from vmas_ros.ros.topic_audit import QosAudit, TopicAudit, quiet_subscription_events
 from vmas_ros.scenarios import make_heuristic
+from vmas_ros.simulator.heuristic_policy import heuristic_actions
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
 
 from builtin_interfaces.msg import Time
@@ -61,12 +63,6 @@ except ImportError:  # pragma: no cover - depends on the installation
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: a best-effort subscriber accepts reliable and best-effort publishers alike
 ACCEPT_ANY = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-
-
-def _type_name(message) -> str:
-    """``pkg/msg/Name`` of a message instance (e.g. sensor_msgs/msg/LaserScan)."""
-    module = type(message).__module__.split(".")[0]
-    return f"{module}/msg/{type(message).__name__}"
 
 
 def _stamp(nanoseconds: int) -> Time:
@@ -261,7 +257,7 @@ class SimNode(StepLoop, Node):
         """Write ``message`` to the bag, stamped ``stamp_ns`` (default: now in simulation time)."""
         if self.recorder is not None:
             stamp_ns = self.sim_time_ns if stamp_ns is None else stamp_ns
-            self.recorder.write(self._topic(topic), _type_name(message), message, stamp_ns, qos=qos)
+            self.recorder.write(self._topic(topic), type_name(type(message)), message, stamp_ns, qos=qos)
 
     def _topic(self, name: str) -> str:
         return name if name.startswith("/") else f"/{name}"
@@ -296,7 +292,7 @@ class SimNode(StepLoop, Node):
     def _actions(self) -> List[torch.Tensor]:
         env, p = self.env, self.params
         if p.control == "heuristic":
-            actions = [self.policy.compute_action(o, u_range=a.u_range) for o, a in zip(self.obs, env.agents)]
+            actions = heuristic_actions(self.policy, env, self.obs)
         elif p.control == "policy":
             actions = policy_actions(self.learned, self.obs, self.agent_topics.bounds)
         else:  # zero: the same zero tensors every step (never written: a command writes into a copy)
@@ -323,7 +319,7 @@ class SimNode(StepLoop, Node):
     def _send(self, publisher, message) -> None:
         publisher.publish(message)
         if self.recorder is not None:
-            self._step_records.append((publisher.topic_name, _type_name(message), message))
+            self._step_records.append((publisher.topic_name, type_name(type(message)), message))
 
     def _record_payload(self, topic: str, kind: str, payload: bytes) -> None:
         self._step_records.append((topic, kind, payload))

@@ -18,6 +18,8 @@ from __future__ import annotations
 import abc
 from typing import Dict, Iterable, List, Set, Tuple
 
+from vmas_ros.ros.message_types import type_name
+
 #: seconds between two looks at the graph
 AUDIT_PERIOD_S = 2.0
 
@@ -88,7 +90,7 @@ class TopicAudit(_GraphAudit):
     def of_inputs(cls, node, subscriptions: Iterable, what: str) -> "TopicAudit":
         """The audit of ``subscriptions`` (rclpy Subscription objects): a publisher of another type on
         one of their topics is named once; ``what`` (e.g. "policy_node") ends the warning."""
-        expected = {sub.topic_name: type_name_of(sub.msg_type) for sub in subscriptions}
+        expected = {sub.topic_name: type_name(sub.msg_type) for sub in subscriptions}
         return cls(node, expected, (), (), consequence=f"{what} never receives its messages")
 
     def problems(self) -> List[Tuple[str, str, str]]:
@@ -170,8 +172,3 @@ class QosAudit(_GraphAudit):
     def warning(self, problem: tuple) -> str:
         topic, subscriber, reason = problem
         return f"the subscriber {subscriber} of {topic} receives nothing: {reason}"
-
-
-def type_name_of(message_class: type) -> str:
-    """``pkg/msg/Name`` of a message class, as the ROS graph reports types (e.g. std_msgs/msg/String)."""
-    return f"{message_class.__module__.split('.')[0]}/msg/{message_class.__name__}"
