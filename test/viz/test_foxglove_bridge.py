@@ -25,6 +25,7 @@ pytest.importorskip("foxglove")
 import websockets  # noqa: E402  (test extra: a real Foxglove WebSocket client)
 
 import vmas_ros  # noqa: E402
+from vmas_ros.policy.protobuf_wire import read_fields, read_varint  # noqa: E402
 from vmas_ros.ros import convert  # noqa: E402
 from vmas_ros.simulator.sensors import Lidar  # noqa: E402
 from test.foxglove_client import SUBPROTOCOL, WAIT, FoxClient, twist_json  # noqa: E402
@@ -91,37 +92,6 @@ def bridge(sim, twists):
 
 
 # ------------------------------------------------------------------ protobuf reader
-def _varint(buf, i):
-    shift = result = 0
-    while True:
-        byte = buf[i]
-        i += 1
-        result |= (byte & 0x7F) << shift
-        if not byte & 0x80:
-            return result, i
-        shift += 7
-
-
-def _fields(buf):
-    """(field number, wire type, raw value) of a protobuf message."""
-    i = 0
-    while i < len(buf):
-        key, i = _varint(buf, i)
-        number, wire = key >> 3, key & 7
-        if wire == 0:
-            value, i = _varint(buf, i)
-        elif wire == 1:
-            value, i = buf[i:i + 8], i + 8
-        elif wire == 2:
-            n, i = _varint(buf, i)
-            value, i = buf[i:i + n], i + n
-        elif wire == 5:
-            value, i = buf[i:i + 4], i + 4
-        else:
-            raise ValueError(f"unsupported wire type {wire}")
-        yield number, wire, value
-
-
 def _descriptors(file_descriptor_set: bytes) -> dict:
     """Full message name -> {field number: (name, type, type_name, repeated)} from a FileDescriptorSet."""
     messages = {}
@@ -129,11 +99,11 @@ def _descriptors(file_descriptor_set: bytes) -> dict:
     def message(buf, scope):
         name, fields = None, {}
         nested = []
-        for number, _, value in _fields(buf):
+        for number, _, value in read_fields(buf):
             if number == 1:
                 name = value.decode()
             elif number == 2:  # FieldDescriptorProto
-                f = {n: v for n, _, v in _fields(value)}
+                f = {n: v for n, _, v in read_fields(value)}
                 fields[f[3]] = (f[1].decode(), f.get(5), f.get(6, b"").decode().lstrip("."), f.get(4) == 3)
             elif number == 3:
                 nested.append(value)
@@ -142,12 +112,12 @@ def _descriptors(file_descriptor_set: bytes) -> dict:
         for buf_nested in nested:
             message(buf_nested, full)
 
-    for number, _, file_buf in _fields(file_descriptor_set):
+    for number, _, file_buf in read_fields(file_descriptor_set):
         if number != 1:
             continue
         package = ""
         bodies = []
-        for n, _, v in _fields(file_buf):
+        for n, _, v in read_fields(file_buf):
             if n == 2:
                 package = v.decode()
             elif n == 4:
@@ -163,7 +133,7 @@ _SCALAR = {1: "<d", 2: "<f", 6: "<Q", 7: "<I", 15: "<i", 16: "<q"}
 def decode(descriptors: dict, type_name: str, buf: bytes) -> dict:
     fields = descriptors[type_name]
     out = {}
-    for number, wire, raw in _fields(buf):
+    for number, wire, raw in read_fields(buf):
         if number not in fields:
             continue
         name, ftype, sub, repeated = fields[number]
@@ -185,7 +155,7 @@ def decode(descriptors: dict, type_name: str, buf: bytes) -> dict:
             if wire == 2:
                 k = 0
                 while k < len(raw):
-                    v, k = _varint(raw, k)
+                    v, k = read_varint(raw, k)
                     values.append(v)
         if repeated:
             out.setdefault(name, []).extend(values)

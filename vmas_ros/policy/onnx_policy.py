@@ -24,9 +24,11 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Union
 
 import numpy as np
+
+from vmas_ros.policy.protobuf_wire import ProtobufFormatError, read_fields
 
 __all__ = ["OnnxPolicy", "validate_metadata", "POLICY_FORMAT", "POLICY_VERSION", "sha256_of_file", "external_tensors"]
 
@@ -144,48 +146,9 @@ _EXTERNAL = 1
 _MAX_DEPTH = 64  # subgraphs nest (If/Loop bodies); deeper is malformed or hostile
 
 
-class OnnxFormatError(ValueError):
-    """The bytes are not a well-formed protobuf message."""
-
-
-def _varint(data: bytes, i: int) -> Tuple[int, int]:
-    value = shift = 0
-    while True:
-        if i >= len(data) or shift > 63:
-            raise OnnxFormatError("truncated or oversized varint")
-        byte = data[i]
-        i += 1
-        value |= (byte & 0x7F) << shift
-        if not byte & 0x80:
-            return value, i
-        shift += 7
-
-
-def _fields(data: bytes) -> Iterator[Tuple[int, int, object]]:
-    """(field number, wire type, value) of one message; length-delimited values as bytes."""
-    i = 0
-    while i < len(data):
-        key, i = _varint(data, i)
-        number, wire = key >> 3, key & 7
-        if wire == 0:
-            value, i = _varint(data, i)
-        elif wire == 1:
-            value, i = data[i:i + 8], i + 8
-        elif wire == 2:
-            size, i = _varint(data, i)
-            if i + size > len(data):
-                raise OnnxFormatError("length-delimited field runs past the end")
-            value, i = data[i:i + size], i + size
-        elif wire == 5:
-            value, i = data[i:i + 4], i + 4
-        else:
-            raise OnnxFormatError(f"unsupported wire type {wire}")
-        yield number, wire, value
-
-
 def _tensor(data: bytes, found: List[str]) -> None:
     name, external = "", False
-    for number, wire, value in _fields(data):
+    for number, wire, value in read_fields(data):
         if number == _TENSOR_NAME and wire == 2:
             name = bytes(value).decode("utf-8", "replace")
         elif number == _TENSOR_DATA_LOCATION and wire == 0 and value == _EXTERNAL:
@@ -197,16 +160,16 @@ def _tensor(data: bytes, found: List[str]) -> None:
 
 
 def _sparse(data: bytes, found: List[str]) -> None:
-    for number, wire, value in _fields(data):
+    for number, wire, value in read_fields(data):
         if number in (_SPARSE_VALUES, _SPARSE_INDICES) and wire == 2:
             _tensor(value, found)
 
 
 def _node(data: bytes, found: List[str], depth: int) -> None:
-    for number, wire, attribute in _fields(data):
+    for number, wire, attribute in read_fields(data):
         if number != _NODE_ATTRIBUTE or wire != 2:
             continue
-        for field, kind, value in _fields(attribute):
+        for field, kind, value in read_fields(attribute):
             if kind != 2:
                 continue
             if field in (_ATTR_T, _ATTR_TENSORS):
@@ -219,8 +182,8 @@ def _node(data: bytes, found: List[str], depth: int) -> None:
 
 def _graph(data: bytes, found: List[str], depth: int) -> None:
     if depth > _MAX_DEPTH:
-        raise OnnxFormatError(f"subgraphs nested deeper than {_MAX_DEPTH}")
-    for number, wire, value in _fields(data):
+        raise ProtobufFormatError(f"subgraphs nested deeper than {_MAX_DEPTH}")
+    for number, wire, value in read_fields(data):
         if wire != 2:
             continue
         if number == _GRAPH_INITIALIZER:
@@ -234,17 +197,17 @@ def _graph(data: bytes, found: List[str], depth: int) -> None:
 def external_tensors(model: bytes) -> List[str]:
     """Names of every tensor in the serialised ModelProto whose data lives in another file.
 
-    Raises :class:`OnnxFormatError` when the bytes are not a protobuf message.
+    Raises :class:`ProtobufFormatError` when the bytes are not a protobuf message.
     """
     found: List[str] = []
     data = memoryview(model).tobytes() if not isinstance(model, bytes) else model
-    for number, wire, value in _fields(data):
+    for number, wire, value in read_fields(data):
         if wire != 2:
             continue
         if number == _MODEL_GRAPH:
             _graph(value, found, 0)
         elif number == _MODEL_FUNCTIONS:
-            for field, kind, node in _fields(value):
+            for field, kind, node in read_fields(value):
                 if field == _FUNCTION_NODE and kind == 2:
                     _node(node, found, 0)
     return found
@@ -316,7 +279,7 @@ class OnnxPolicy:
                              "(the ONNX file was modified or belongs to another export)")
         try:
             external = external_tensors(model)
-        except OnnxFormatError as error:
+        except ProtobufFormatError as error:
             raise ValueError(f"{onnx_path}: not an ONNX model ({error})") from error
         if external:
             raise ValueError(f"{onnx_path}: tensors {external[:5]} keep their data in other files, which "
