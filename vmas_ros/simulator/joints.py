@@ -17,9 +17,15 @@ from vmas_ros.simulator.utils import Color, Observer, TorchUtils, X, Y
 __all__ = ["Joint", "JointConstraint"]
 
 
-def _check_anchor(anchor: Tuple[float, float]) -> None:
-    if len(anchor) != 2 or max(anchor) > 1 or min(anchor) < -1:
-        raise ValueError(f"joint anchors are (x, y) in [-1, 1] shape units, got {anchor}")
+def _check_ends(entity_a, entity_b, anchor_a: Tuple[float, float], anchor_b: Tuple[float, float], dist: float) -> None:
+    """Raise ValueError unless two distinct entities are joined at anchors in [-1, 1]^2 by a rod of length >= 0."""
+    if entity_a is entity_b:
+        raise ValueError(f"cannot join {entity_a.name!r} to itself")
+    for anchor in (anchor_a, anchor_b):
+        if len(anchor) != 2 or max(anchor) > 1 or min(anchor) < -1:
+            raise ValueError(f"joint anchors are (x, y) in [-1, 1] shape units, got {anchor}")
+    if dist < 0:
+        raise ValueError(f"joint dist must be >= 0, got {dist}")
 
 
 class JointConstraint:
@@ -39,12 +45,7 @@ class JointConstraint:
         rotate: bool = True,
         fixed_rotation: Optional[float] = None,
     ) -> None:
-        if entity_a is entity_b:
-            raise ValueError(f"cannot join {entity_a.name!r} to itself")
-        _check_anchor(anchor_a)
-        _check_anchor(anchor_b)
-        if dist < 0:
-            raise ValueError(f"joint dist must be >= 0, got {dist}")
+        _check_ends(entity_a, entity_b, anchor_a, anchor_b, dist)
         if rotate and fixed_rotation is not None:
             raise ValueError("a fixed_rotation needs rotate=False")
         self.entity_a, self.entity_b = entity_a, entity_b
@@ -90,12 +91,7 @@ class Joint(Observer):
     ) -> None:
         from vmas_ros.simulator.entities import Landmark
 
-        if entity_a is entity_b:
-            raise ValueError(f"cannot join {entity_a.name!r} to itself")
-        _check_anchor(anchor_a)
-        _check_anchor(anchor_b)
-        if dist < 0:
-            raise ValueError(f"joint dist must be >= 0, got {dist}")
+        _check_ends(entity_a, entity_b, anchor_a, anchor_b, dist)
         if dist == 0 and (collidable or width != 0 or fixed_rotation_a != fixed_rotation_b):
             raise ValueError("a joint with dist 0 cannot be collidable, have a width, or differ in fixed rotations")
         if (fixed_rotation_a is not None and rotate_a) or (fixed_rotation_b is not None and rotate_b):
