@@ -27,6 +27,7 @@ _ROWS = [  # (VMAS module, top-level names, reason): deliberate differences; "*"
     ("vmas.simulator.core", "TorchVectorizedObject", _ENGINE),
     ("vmas.simulator.core", "World",
      "no update_env_forces: contact forces are summed inside the batched step, not per entity pair"),
+    ("vmas.simulator.physics", "TorchUtils", _IMPORTED),
     ("vmas.simulator.rendering", "*", "our renderer draws with Pillow, headless; pyglet's Viewer classes differ"),
     ("vmas.simulator.heuristic_policy", "BaseHeuristicPolicy RandomPolicy", "continuous_action keeps a default (True)"),
     ("vmas.simulator.joints", "JointConstraint", "joints are drawn by the renderer, not by a render method"),
