@@ -20,7 +20,7 @@ debug_scenarios = list(DEBUG_SCENARIOS)
 mpe_scenarios = list(MPE_SCENARIOS)
 
 #: subpackages reachable as attributes (``vmas_ros.envs.wrap``) without importing them first
-_SUBPACKAGES = ("bench", "envs", "policy", "record", "ros", "simulator", "train", "viz")
+_SUBPACKAGES = ("bench", "envs", "policy", "record", "ros", "simulator", "testing", "train", "viz")
 
 
 def __getattr__(name: str):

@@ -9,43 +9,40 @@ which bounds, which measured returns).
 * spaces: ``assert_same_space`` and ``check_spaces`` (spaces equal to
   upstream's, then a short random rollout that must stay finite and fit them);
 * parity with upstream: ``copy_start`` (upstream's start, and its per-env
-  scenario state, into ours) then ``test.simulator.parity.run_lockstep`` (the
+  scenario state, into ours) then ``vmas_ros.testing.parity.run_lockstep`` (the
   same lock-step loop and state comparison the engine parity tests use);
 * resets: ``check_reset_at`` (exactly the selected envs are redrawn);
 * semantics against MPE (mpe2): ``make_mpe`` and ``copy_env_to_mpe``;
 * policies: ``play_lineups`` (rollouts with per-agent policies, every value
   finite) and ``team_returns`` (heuristic against random returns).
+
+The pieces that ``vmas_ros.testing.check_scenario`` shares with these tests
+(the layouts, random actions and rollouts, the fit of an observation to its
+space, the parity helpers, the row-wise comparison of snapshots) live in the
+shipped package ``vmas_ros.testing`` and are imported from there.
 """
 from __future__ import annotations
 
-import warnings
 from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 import torch
-import vmas
 
 import vmas_ros
-from test.simulator import parity
+from vmas_ros.testing.parity import assert_same_space, copy_start, make_vmas_env
+from vmas_ros.testing.rollout import ACTION_MODES, SPACE_MODES, random_steps, space_actions, space_mismatch
+from vmas_ros.testing.state import changed_rows, entity_state
+
+__all__ = [
+    "ACTION_MODES", "SPACE_MODES", "make", "make_upstream", "assert_same_space", "space_actions", "random_steps",
+    "check_spaces", "copy_start", "ResetCheck", "check_reset_at", "make_mpe", "copy_env_to_mpe", "play_lineups",
+    "team_returns",
+]
 
 #: a function of an env giving named per-env tensors ([B, ...]) of scenario state
 StateFn = Callable[[object], Dict[str, torch.Tensor]]
 #: a policy as ``play_lineups`` calls it: ``(obs [b, obs size], u_range) -> action [b, action size]``
 Policy = Callable[[torch.Tensor, float], torch.Tensor]
-
-#: the action layouts an env can be built with, as ``make_env`` kwargs (continuous, the default, spelt out)
-ACTION_MODES = {
-    "continuous": dict(continuous_actions=True),
-    "discrete": dict(continuous_actions=False),
-    "multidiscrete": dict(continuous_actions=False, multidiscrete_actions=True),
-}
-#: the action layouts (continuous left to the default) and the dict layout of observations and actions
-SPACE_MODES = {
-    "continuous": dict(),
-    "discrete": ACTION_MODES["discrete"],
-    "multidiscrete": ACTION_MODES["multidiscrete"],
-    "dict": dict(dict_spaces=True),
-}
 
 
 # ------------------------------------------------------------------------ envs
@@ -56,71 +53,10 @@ def make(scenario, num_envs: int, seed: int = 0, **kwargs):
 
 def make_upstream(name: str, num_envs: int, seed: int = 0, **kwargs):
     """Upstream VMAS's env for the scenario ``name``, on the CPU; its warnings are muted (not ours to check)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return vmas.make_env(name, num_envs=num_envs, device="cpu", seed=seed, **kwargs)
+    return make_vmas_env(name, num_envs, device="cpu", seed=seed, **kwargs)
 
 
 # ---------------------------------------------------------------------- spaces
-def assert_same_space(ours, up, where: str = "space") -> None:
-    """Structural equality of a gymnasium space (ours) and a gym space (VMAS).
-
-    Same class name at every level; Dict: same keys in the same order; Tuple:
-    same length; MultiDiscrete: same ``nvec``; Discrete: same ``n``; Box: same
-    shape, dtype and bounds.
-    """
-    assert type(ours).__name__ == type(up).__name__, f"{where}: {ours} vs {up}"
-    if isinstance(up.spaces if hasattr(up, "spaces") else None, dict):
-        assert list(ours.spaces) == list(up.spaces), where
-        for key in up.spaces:
-            assert_same_space(ours.spaces[key], up.spaces[key], f"{where}[{key}]")
-    elif hasattr(up, "spaces"):
-        assert len(ours.spaces) == len(up.spaces), where
-        for i, (o, u) in enumerate(zip(ours.spaces, up.spaces)):
-            assert_same_space(o, u, f"{where}[{i}]")
-    elif hasattr(up, "nvec"):
-        np.testing.assert_array_equal(ours.nvec, up.nvec)
-    elif hasattr(up, "n"):
-        assert int(ours.n) == int(up.n), where
-    else:
-        assert ours.shape == up.shape and ours.dtype == up.dtype, f"{where}: {ours} vs {up}"
-        np.testing.assert_array_equal(ours.low, up.low)
-        np.testing.assert_array_equal(ours.high, up.high)
-
-
-def space_actions(env, gen: torch.Generator) -> List[torch.Tensor]:
-    """Uniform actions inside each agent's action space (so messages in [0, 1]), drawn from ``gen``."""
-    actions = []
-    for space in (env.get_agent_action_space(a) for a in env.agents):
-        kind = type(space).__name__
-        if kind == "Box":
-            low, high = torch.tensor(space.low), torch.tensor(space.high)
-            actions.append(low + (high - low) * torch.rand(env.num_envs, len(low), generator=gen))
-        elif kind == "Discrete":
-            actions.append(torch.randint(int(space.n), (env.num_envs, 1), generator=gen))
-        else:
-            nvec = torch.tensor(space.nvec)
-            actions.append((torch.rand(env.num_envs, len(nvec), generator=gen) * nvec).long())
-    return actions
-
-
-def random_steps(env, steps: int, gen: Optional[torch.Generator] = None, as_dict: bool = False):
-    """Step ``env`` ``steps`` times at random; every observation and reward must stay finite.
-
-    Actions are ``space_actions(env, gen)`` when ``gen`` is given, else
-    ``env.get_random_actions()``; with ``as_dict`` they are passed as
-    ``{agent name: action}``. Returns the last ``(obs, rews)``.
-    """
-    for _ in range(steps):
-        actions = env.get_random_actions() if gen is None else space_actions(env, gen)
-        if as_dict:
-            actions = {a.name: act for a, act in zip(env.agents, actions, strict=True)}
-        obs, rews, _, _ = env.step(actions)
-        values = list(obs.values()) + list(rews.values()) if isinstance(obs, dict) else obs + rews
-        assert all(torch.isfinite(v).all() for v in values)
-    return obs, rews
-
-
 def check_spaces(ours, up, steps: int, gen: Optional[torch.Generator] = None, as_dict: bool = False):
     """Our observation and action spaces equal upstream's; then ``steps`` random steps work.
 
@@ -134,23 +70,13 @@ def check_spaces(ours, up, steps: int, gen: Optional[torch.Generator] = None, as
     obs, rews = random_steps(ours, steps, gen, as_dict)
     spaces = ours.observation_space.spaces
     if isinstance(obs, dict):
-        assert {k: tuple(o.shape) for k, o in obs.items()} == {k: (ours.num_envs, *s.shape) for k, s in spaces.items()}
+        assert set(obs) == set(spaces), f"observations of {sorted(obs)}, spaces of {sorted(spaces)}"
+        fits = [space_mismatch(o, spaces[k], ours.num_envs, f"observation of {k}") for k, o in obs.items()]
     else:
-        assert [tuple(o.shape) for o in obs] == [(ours.num_envs, *s.shape) for s in spaces]
+        assert len(obs) == len(spaces), f"{len(obs)} observations, {len(spaces)} spaces"
+        fits = [space_mismatch(o, s, ours.num_envs, f"observation {i}") for i, (o, s) in enumerate(zip(obs, spaces))]
+    assert fits == [None] * len(fits), [problem for problem in fits if problem]
     return obs, rews
-
-
-# ---------------------------------------------------------------------- parity
-def copy_start(up, ours, scenario_state: Optional[Callable[[object, object], None]] = None) -> None:
-    """Start ours where upstream's reset left it, so that ``parity.run_lockstep`` can compare them.
-
-    Every entity's pos, vel, rot and ang_vel are copied (``parity.copy_state``).
-    Scenarios that also draw per-env state at reset (goals, secrets, ...) pass
-    ``scenario_state(up, ours)``, which writes upstream's draw into ours.
-    """
-    parity.copy_state(up, ours)
-    if scenario_state is not None:
-        scenario_state(up, ours)
 
 
 # ---------------------------------------------------------------------- resets
@@ -164,7 +90,7 @@ class ResetCheck(NamedTuple):
 
 
 def _snapshot(env, scenario_state: Optional[StateFn]) -> Dict[str, torch.Tensor]:
-    state = {f"{e.name}.{f}": getattr(e.state, f).clone() for e in env.world.entities for f in ("pos", "vel")}
+    state = entity_state(env, ("pos", "vel"))
     if scenario_state is not None:
         state.update({key: value.clone() for key, value in scenario_state(env).items()})
     return state
@@ -197,8 +123,8 @@ def check_reset_at(
     before = _snapshot(env, scenario_state)
     obs = env.reset_at(index)
     after = _snapshot(env, scenario_state)
-    for key, value in before.items():
-        assert torch.equal(after[key][~chosen], value[~chosen]), key
+    unchosen_changed = changed_rows(before, after, ~chosen)
+    assert not unchosen_changed, f"changed outside the reset envs: {unchosen_changed}"
     for e in env.world.entities:
         pos = e.state.pos[chosen]
         assert (pos != before[f"{e.name}.pos"][chosen]).all() and (e.state.vel[chosen] == 0).all(), e.name

@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator import parity
+from vmas_ros.testing import parity
 from vmas_ros.scenarios import buzz_wire
 
 NAME = "buzz_wire"

@@ -16,7 +16,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator import parity
+from vmas_ros.testing import parity
 from vmas_ros.scenarios import football
 from vmas_ros.scenarios.football_ai import HeuristicPolicy
 from vmas_ros.simulator.utils import LINE_MIN_DIST

@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import give_way
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 

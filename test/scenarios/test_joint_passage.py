@@ -22,7 +22,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator import parity
+from vmas_ros.testing import parity
 from vmas_ros.scenarios import joint_passage as jp
 from vmas_ros.scenarios import joint_passage_common as common
 from vmas_ros.simulator.heuristic_policy import RandomPolicy

@@ -20,7 +20,7 @@ from test.scenarios.harness import SPACE_MODES
 from test.scenarios.test_joint_passage import (
     compare_steps, copy_scenario_state, heuristic_actions, place_upright, reset_at_check, scenario_state,
 )
-from test.simulator import parity
+from vmas_ros.testing import parity
 from vmas_ros.scenarios import joint_passage_common as common
 from vmas_ros.scenarios import joint_passage_size as jps
 from vmas_ros.simulator.heuristic_policy import RandomPolicy

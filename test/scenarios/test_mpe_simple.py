@@ -11,7 +11,7 @@ import torch
 from mpe2 import simple_v3
 
 from test.scenarios import harness
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 

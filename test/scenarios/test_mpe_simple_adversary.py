@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_adversary as scenario
 
 NAME = "simple_adversary"

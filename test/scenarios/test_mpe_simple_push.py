@@ -12,7 +12,7 @@ from mpe2 import simple_push_v3
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_push
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_speaker_listener
 
 NAME = "simple_speaker_listener"

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_world_comm
 
 NAME = "simple_world_comm"

@@ -13,8 +13,8 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator import parity
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing import parity
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import multi_give_way
 
 NAME = "multi_give_way"

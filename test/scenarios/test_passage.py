@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator import parity
+from vmas_ros.testing import parity
 from vmas_ros.scenarios import passage
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.heuristic_policy import RandomPolicy

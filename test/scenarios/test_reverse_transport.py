@@ -10,7 +10,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.bench.heuristics import episode_returns
 from vmas_ros.scenarios import reverse_transport
 from vmas_ros.simulator.heuristic_policy import RandomPolicy

@@ -10,7 +10,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.bench.heuristics import episode_returns
 from vmas_ros.scenarios import transport
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
@@ -269,13 +269,15 @@ def test_cached_observations_follow_the_state_and_never_alias():
     assert not torch.equal(moved[0], first[0])
 
 
-def test_observation_layouts_agree():
-    """The compiled layout of the observations (one concatenation) equals the eager block writes."""
+def test_observation_columns_compiled_and_eager_agree():
+    """The observation layout (layout.cat_columns) gives the same bits eagerly and under torch.compile,
+    where it is one concatenation."""
     from vmas_ros.scenarios import transport
 
     gen = torch.Generator().manual_seed(1)
     for n_packages in (1, 3):
         pos, vel = torch.randn(2 + n_packages + 3, 50, 2, generator=gen), torch.randn(2 + n_packages + 3, 50, 2, generator=gen)
         on_goal = torch.rand(50, n_packages, generator=gen) > 0.5
-        assert torch.equal(transport._observations_by_cat(pos, vel, on_goal, n_packages),
-                           transport.observations(pos, vel, on_goal, n_packages))
+        eager = transport.observations(pos, vel, on_goal, n_packages)
+        compiled = torch.compile(transport.observations, fullgraph=True, dynamic=False)(pos, vel, on_goal, n_packages)
+        assert torch.equal(eager, compiled)

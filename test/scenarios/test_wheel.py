@@ -15,7 +15,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import wheel
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 from vmas_ros.simulator.utils import LINE_MIN_DIST

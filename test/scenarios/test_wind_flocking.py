@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
-from test.simulator import parity
+from vmas_ros.testing import parity
 from vmas_ros.scenarios import wind_flocking
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 

@@ -32,12 +32,13 @@ import sys
 import types
 import warnings
 from pathlib import Path
-from typing import Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import torch
 
-FIELDS = ("pos", "vel", "rot", "ang_vel")
+from vmas_ros.testing.state import FIELDS, assign_kept, capture_kept
+
 #: what a side records after the reset, under these path prefixes
 STATE, KEPT = "state", "kept"
 _IMPORT = re.compile(r"^(\s*)(from|import)\s+vmas\b", re.MULTILINE)
@@ -69,71 +70,20 @@ def load_repointed(name: str, path: Path) -> types.ModuleType:
 
 
 # ------------------------------------------------------------ scenario state
-def _holders(env) -> Iterator[Tuple[str, object]]:
-    yield "scenario", env.scenario
-    for entity in env.world.entities:
-        yield f"entity[{entity.name}]", entity
-
-
-def _kept_tensors(owner, prefix: str, depth: int = 2) -> Iterator[Tuple[str, torch.Tensor]]:
-    """Tensors the scenario keeps in public attributes, one or two levels down (lists, dicts, plain objects).
-
-    Entities, worlds and scenarios met on the way are not entered: they are
-    holders of their own, or the engine.
-    """
-    for key, value in list(vars(owner).items()):
-        if key.startswith("_"):
-            continue
-        path = f"{prefix}.{key}"
-        if isinstance(value, torch.Tensor):
-            yield path, value
-        elif isinstance(value, (list, tuple)) and value and all(isinstance(v, torch.Tensor) for v in value):
-            for i, v in enumerate(value):
-                yield f"{path}[{i}]", v
-        elif isinstance(value, dict) and value and all(isinstance(v, torch.Tensor) for v in value.values()):
-            for i, (k, v) in enumerate(value.items()):  # keys that are objects (e.g. agents) by position
-                yield f"{path}{{{k if isinstance(k, (str, int)) else f'#{i}'}}}", v
-        elif depth > 1 and hasattr(value, "__dict__") and not _is_engine_object(value):
-            yield from _kept_tensors(value, path, depth - 1)
-
-
-def _is_engine_object(value) -> bool:
-    names = {cls.__name__ for cls in type(value).__mro__}
-    return bool(names & {"Entity", "World", "BaseScenario", "Environment", "Shape"}) or isinstance(value, types.ModuleType)
-
-
 def capture_start(env) -> Dict[str, torch.Tensor]:
-    """Entity states and kept tensors after a reset, keyed by path."""
+    """Entity states and kept tensors after a reset, keyed by path.
+
+    The kept tensors are those ``vmas_ros.testing.state.capture_kept`` finds
+    (the same walk ``check_scenario`` copies VMAS's scenario state with), and
+    ``apply_start`` writes them with its ``assign_kept``.
+    """
     start = {}
     for entity in env.world.entities:
         for field in FIELDS:
             start[f"{STATE}[{entity.name}].{field}"] = getattr(entity.state, field).clone()
-    for prefix, holder in _holders(env):
-        for path, value in _kept_tensors(holder, f"{KEPT}:{prefix}"):
-            start[path] = value.clone()
+    for path, value in capture_kept(env).items():
+        start[f"{KEPT}:{path}"] = value
     return start
-
-
-def _assign(owner, path: str, value: torch.Tensor) -> bool:
-    """Write ``value`` in place of the tensor at ``path`` below ``owner``; False where ours has no such place."""
-    parts = re.findall(r"\.(\w+)|\[(\d+)\]|\{([^}]*)\}", path)
-    target = owner
-    for attr, index, key in parts[:-1]:
-        target = getattr(target, attr, None) if attr else (target[int(index)] if index else target.get(key))
-        if target is None:
-            return False
-    attr, index, key = parts[-1]
-    if attr:
-        if not isinstance(getattr(target, attr, None), torch.Tensor):
-            return False
-        setattr(target, attr, value.clone())
-    elif index:
-        target[int(index)] = value.clone()
-    elif key.startswith("#"):
-        target[list(target)[int(key[1:])]] = value.clone()
-    else:
-        target[key] = value.clone()
-    return True
 
 
 def set_states(env, states: Dict[str, torch.Tensor], keep_joint_rotations: bool) -> None:
@@ -162,15 +112,8 @@ def apply_start(env, start: Dict[str, torch.Tensor]) -> List[str]:
     """Give our env the recorded start; returns the kept-tensor paths ours has no place for."""
     set_states(env, {path[len(STATE) + 1:].replace("].", "."): value
                      for path, value in start.items() if path.startswith(STATE)}, keep_joint_rotations=False)
-    holders = dict(_holders(env))
-    missing = []
-    for path, value in start.items():
-        if path.startswith(KEPT):
-            rest = path[len(KEPT) + 1:]  # "scenario.x..." or "entity[name].x..."
-            holder_name = rest[: rest.index("]") + 1] if rest.startswith("entity[") else "scenario"
-            if not _assign(holders[holder_name], rest[len(holder_name):], value):
-                missing.append(path)
-    return missing
+    return [path for path, value in start.items()
+            if path.startswith(KEPT) and not assign_kept(env, path[len(KEPT) + 1:], value)]
 
 
 def capture_rng(env) -> Dict[str, torch.Tensor]:

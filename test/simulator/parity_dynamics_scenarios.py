@@ -12,7 +12,7 @@ from typing import Callable, Optional, Tuple
 
 import torch
 
-from test.simulator import parity
+from vmas_ros.testing import parity
 
 SOURCE = '''
 import torch

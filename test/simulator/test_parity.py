@@ -13,7 +13,8 @@ import pytest
 
 import vmas
 import vmas_ros
-from test.simulator import parity, parity_scenarios
+from test.simulator import parity_scenarios
+from vmas_ros.testing import parity
 
 UP = parity_scenarios.load("vmas")
 OURS = parity_scenarios.load("vmas_ros")

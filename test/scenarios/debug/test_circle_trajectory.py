@@ -12,7 +12,7 @@ from vmas.simulator.environment.environment import Environment as UpstreamEnviro
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import ATOL, run_lockstep, uniform_actions
+from vmas_ros.testing.parity import ATOL, run_lockstep, uniform_actions
 from vmas_ros.scenarios.debug import circle_trajectory as scenario
 
 NAME = "circle_trajectory"

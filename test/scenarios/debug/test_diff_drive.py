@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import diff_drive
 from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation

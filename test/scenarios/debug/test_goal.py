@@ -7,7 +7,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.debug.test_circle_trajectory import lockstep_actions
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import goal as scenario
 
 NAME = "goal"

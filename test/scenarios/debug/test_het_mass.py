@@ -12,8 +12,8 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator import parity
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing import parity
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import het_mass
 
 NAME = "het_mass"

@@ -13,7 +13,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.debug.test_diff_drive import crowd_start, home_distances
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import kinematic_bicycle as kb
 from vmas_ros.simulator.dynamics.kinematic_bicycle import KinematicBicycle
 

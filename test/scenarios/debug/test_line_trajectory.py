@@ -7,7 +7,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.debug.test_circle_trajectory import keep_upstream_rng, lockstep_actions  # noqa: F401
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import line_trajectory as scenario
 
 NAME = "line_trajectory"

@@ -11,7 +11,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep
+from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import pollock as scenario
 
 NAME = "pollock"

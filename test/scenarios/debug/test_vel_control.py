@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from test.simulator.parity import run_lockstep, uniform_actions
+from vmas_ros.testing.parity import run_lockstep, uniform_actions
 from vmas_ros.scenarios.debug import vel_control
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 
