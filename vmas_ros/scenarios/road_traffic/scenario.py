@@ -158,11 +158,12 @@ class Scenario(BaseScenario):
         return torch.stack([getattr(a.state, field) for a in self.world.agents], dim=1)
 
     def _mutual_distances(self) -> Tensor:
-        """Centre distances [B, n, n]; an agent's own is larger than every other (the batch's largest + 1)."""
+        """Centre distances [B, n, n]; an agent's own is larger than every other in its env (the env's
+        largest + 1; VMAS takes the whole batch's largest, which couples the envs)."""
         pos = self._stack("pos")
         mutual = torch.linalg.vector_norm(pos.unsqueeze(2) - pos.unsqueeze(1), dim=-1)
         eye = torch.eye(self.n_agents, dtype=torch.bool, device=pos.device)
-        return torch.where(eye, mutual.max() + 1, mutual)
+        return torch.where(eye, mutual.amax(dim=(1, 2), keepdim=True) + 1, mutual)
 
     def _track(self, rows) -> None:
         """Corners and distances to route and boundaries (with the nearest points) for envs ``rows``."""
