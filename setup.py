@@ -23,7 +23,7 @@ setup(
         (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.py"))),
     ],
     # torch is deliberately unpinned here; scripts/setup.sh installs the pinned
-    # CPU build first (see README).
+    # CPU build first (see docs/install.md).
     install_requires=["numpy", "torch", "gymnasium", "pillow", "pyyaml", "tqdm"],
     extras_require={
         "ros": [

@@ -7,7 +7,7 @@ parameter file; default the package's config/<scenario>.yaml when it exists),
 sim_node's observation topics) and ``rate_hz`` (policy_node's rate). sim_node
 runs with ``control: zero``, so every motion comes from policy_node. Where
 ``ros2 launch`` is not installed (PyPI wheels), start the two processes by
-hand (README: "Running a learned policy: policy_node").
+hand (docs/policy_node.md).
 """
 import os
 

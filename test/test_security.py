@@ -1,6 +1,6 @@
 """Security rules: no unsafe deserialisation, file paths stay where the user pointed, loopback by default.
 
-The rules (README "Security"):
+The rules (docs/security.md):
 
 * no ``pickle``/``marshal``/``dill``, ``torch.load`` without ``weights_only=True``,
   ``yaml.load``/``unsafe_load``, ``eval``/``exec``, ``shell=True``, ``os.system``

@@ -235,7 +235,7 @@ def test_missing_peer_and_failing_workload_do_not_stop_the_suite(monkeypatch, ca
     (["--curve-agents", "10", "0"], "curve_agents must be positive integers; bad value(s): [0]"),
     (["--curve-envs", "-5"], "curve_envs must be positive integers; bad value(s): [-5]"),
     (["--peers", "vmas", "gazebo"], "unknown peer(s) ['gazebo']; valid peers: ['vmas', 'mpe']"),
-    (["--devices", "cuda"], "cpu only (issue 7); got devices ['cuda']; valid: cpu"),
+    (["--devices", "cuda"], "cpu only (its targets are CPU targets); got devices ['cuda']; valid: cpu"),
     (["--num-envs", "7"], "--num-envs 7 is for 'bench mpe'"),
     (["--modes", "eager", "compild"], "unknown mode(s) ['compild']; valid modes: eager, compiled"),
     (["--compile-physics", "--modes", "eager", "compiled"],

@@ -172,18 +172,18 @@ def test_policy_actions_are_batched_over_envs_and_clamped(tmp_path):
     assert all(torch.equal(a, torch.tensor([[1.0, -1.0]] * 5)) for a in clamped)
 
 
-def test_readme_adapter_example_reproduces_the_simple_scenario():
-    """The README's adapter example is real code: run it and compare with the Environment."""
+def test_documented_adapter_example_reproduces_the_simple_scenario():
+    """docs/policy_node.md's adapter example is real code: run it and compare with the Environment."""
     import re
     from pathlib import Path
 
     from geometry_msgs.msg import PoseStamped
 
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    section = readme[readme.index("## Running a learned policy"):]
+    page = (Path(__file__).resolve().parents[2] / "docs" / "policy_node.md").read_text()
+    section = page[page.index("## Observation adapters"):]
     block = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     namespace: dict = {}
-    exec(compile(block, "README.md", "exec"), namespace)
+    exec(compile(block, "docs/policy_node.md", "exec"), namespace)
     env = vmas_ros.make_env("simple", num_envs=2, seed=3)
     env.reset()
     for _ in range(4):

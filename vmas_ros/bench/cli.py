@@ -23,8 +23,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     Options marked "suite:" only apply to ``vmas-ros bench suite``."""
     if with_benchmark_name:
         parser.add_argument("benchmark", nargs="?", default="mpe",
-                            help="which benchmark: mpe (default; the VMAS paper's Fig. 2), suite (issue 7) or node "
-                                 "(sim_node's steps/s while publishing)")
+                            help="which benchmark: mpe (default; the VMAS paper's Fig. 2), suite (vmas_ros "
+                                 "against VMAS on the project's workloads) or node (sim_node's steps/s while "
+                                 "publishing)")
     # dest is not ``num_envs``: cli.main compares args.num_envs with an int
     parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=list(DEFAULT_NUM_ENVS),
                         metavar="N", help="mpe: numbers of parallel envs (default: 1 10 100 1000)")

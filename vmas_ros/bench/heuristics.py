@@ -1,6 +1,6 @@
 """``vmas-ros evaluate``: every scenario's heuristic against random actions, as episode returns.
 
-The README's scenario table is produced by this module, so the numbers there
+The heuristics table (docs/bench/heuristics.md) is produced by this module, so its numbers
 can be re-measured by anyone with one command. For each scenario it runs one
 batch of ``num_envs`` episodes with the heuristic and one with uniformly random
 actions (same seed, so the same starts), each at most ``max_steps`` long, and
@@ -138,7 +138,7 @@ def _teams_text(evaluation: Evaluation) -> str:
 
 
 def format_markdown(results: Sequence[Evaluation]) -> str:
-    """The README table: one row per scenario, heuristic against random."""
+    """The heuristics table: one row per scenario, heuristic against random."""
     by_scenario: Dict[str, Dict[str, Evaluation]] = {}
     for result in results:
         by_scenario.setdefault(result.scenario, {})[result.policy] = result

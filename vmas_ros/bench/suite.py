@@ -1,7 +1,7 @@
-"""The project's benchmark suite (issue 7): vmas_ros against upstream VMAS 1.5.2 on CPU.
+"""The project's benchmark suite: vmas_ros against upstream VMAS 1.5.2 on CPU.
 
 ``vmas-ros bench suite`` runs the workloads of :data:`WORKLOADS` and reports each
-speed-up next to the issue's target (see :mod:`vmas_ros.bench.suite_report`).
+speed-up next to the project's target (see :mod:`vmas_ros.bench.suite_report`).
 
 How each side is measured, and why:
 
@@ -408,7 +408,8 @@ def run_suite_command(args) -> int:
         validate_suite_options(**options)
         devices = getattr(args, "devices", None) or ["cpu"]
         if [d for d in devices if d != "cpu"]:
-            raise ValueError(f"the suite runs on cpu only (issue 7); got devices {devices}; valid: cpu")
+            raise ValueError(f"the suite runs on cpu only (its targets are CPU targets); got devices {devices}; "
+                             "valid: cpu")
         num_envs = getattr(args, "bench_num_envs", None)
         if num_envs is not None and list(num_envs) != list(DEFAULT_NUM_ENVS):
             raise ValueError(f"--num-envs {' '.join(map(str, num_envs))} is for 'bench mpe'; the suite takes "

@@ -1,5 +1,5 @@
 """Results of the benchmark suite (:mod:`vmas_ros.bench.suite`): ratios against the
-issue's targets, the markdown tables, the two plots and the files in ``--out``.
+project's targets, the markdown tables, the two plots and the files in ``--out``.
 
 Kept apart from the runner so a report can be rebuilt from saved or synthetic
 rows (the tests feed it rows they made up to check the met/not-met logic).
@@ -24,7 +24,7 @@ from vmas_ros.bench.report import machine_info, write_csv
 __all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "measured_modes",
            "summarize", "write_suite_results"]
 
-#: issue 7's targets: (op, value) on the ratio. Time: peer / vmas_ros (speed-up, higher
+#: the project's speed and memory targets: (op, value) on the ratio. Time: peer / vmas_ros (speed-up, higher
 #: is better). Memory: vmas_ros / peer peak RSS (lower is better).
 TARGETS: Dict[str, Tuple[str, float]] = {
     "spread_1": (">=", 5.0),
@@ -356,7 +356,7 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
                 "targets": {k: list(v) for k, v in TARGETS.items()}, "notes": notes, "rows": rows, "summary": summary}
     with open(paths["json"], "w", encoding="utf-8") as handle:
         json.dump(document, handle, indent=2, allow_nan=False)
-    header = ("# Benchmark suite: vmas_ros vs VMAS 1.5.2 (issue 7)\n\n"
+    header = ("# Benchmark suite: vmas_ros vs VMAS 1.5.2\n\n"
               + f"Modes measured: {', '.join(modes) or 'none'}. "
               + _MODES_LINE.get(tuple(modes), "") + "\n\n"
               + _title(info, f"{'/'.join(map(str, sorted({r['steps'] for r in rows})))} steps per run").replace(

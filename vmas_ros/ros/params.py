@@ -31,7 +31,7 @@ PATH_PARAMETERS = ("record_path", "policy_path")
 
 @dataclass
 class SimParams:
-    """Defaults of every sim_node parameter (documented in the README)."""
+    """Defaults of every sim_node parameter (documented in docs/node.md)."""
 
     scenario: str = "simple_spread"
     scenario_kwargs: str = "{}"
@@ -239,7 +239,7 @@ MAX_POLICY_RATE = 1000.0
 
 @dataclass
 class PolicyNodeParams:
-    """Defaults of every policy_node parameter (documented in the README)."""
+    """Defaults of every policy_node parameter (documented in docs/policy_node.md)."""
 
     policy_path: str = ""
     output: str = "action"

@@ -54,7 +54,7 @@ class PolicyNode(Node):
         for name in PolicyNodeParams.names():
             self.declare_parameter(
                 name, overrides.get(name, getattr(defaults, name)),
-                ParameterDescriptor(description="see README: policy_node parameters", dynamic_typing=True),
+                ParameterDescriptor(description="see docs/policy_node.md: parameters", dynamic_typing=True),
             )
         self.params = self._read_params()
         self.policy = self._load_policy()

@@ -78,7 +78,7 @@ class SimNode(StepLoop, Node):
         for name in SimParams.names():
             self.declare_parameter(
                 name, overrides.get(name, getattr(defaults, name)),
-                ParameterDescriptor(description="see README: sim_node parameters", dynamic_typing=True),
+                ParameterDescriptor(description="see docs/node.md: sim_node parameters", dynamic_typing=True),
             )
         self.params = self._read_params()
         self.add_on_set_parameters_callback(self._on_set_parameters)

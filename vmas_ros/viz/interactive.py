@@ -88,7 +88,7 @@ class InteractivePlayer:
         self.selected2: Optional[int] = 1 if control_two_agents else None
         self.held: Set[str] = set()
         self.quit_requested = False
-        self.total_steps = 0  # steps played this session, resets included
+        self.total_steps = 0  # steps played since the window opened, resets included
         self._reset_state(env.reset())
 
     # ----------------------------------------------------------------- state
