@@ -333,6 +333,8 @@ class Environment:
         rewards = gather(self.scenario.reward, lambda r: r.clone()) if get_rewards else None
         keep = (lambda o: o) if self.scenario.fresh_observations else TorchUtils.recursive_clone
         obs = gather(self.scenario.observation, keep) if get_obs else None
+        if get_obs and isinstance(self.scenario, BaseScenario):
+            self.scenario.env_observations_handed_out()
         infos = gather(self.scenario.info, TorchUtils.recursive_clone) if get_infos else None
         if self.terminated_truncated:
             terminated = truncated = None

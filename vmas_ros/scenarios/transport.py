@@ -30,7 +30,6 @@ Kwargs
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import torch
@@ -38,9 +37,8 @@ import torch
 from vmas_ros.scenarios import packages as pk
 from vmas_ros.scenarios.common import read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
-from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
-from vmas_ros.simulator.layout import join_xy
+from vmas_ros.simulator.layout import cat_columns, join_xy
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import Color
@@ -95,12 +93,6 @@ class Scenario(BaseScenario):
         self.on_goal = torch.zeros(batch_dim, self.n_packages, dtype=torch.bool, device=world.device)
         self._reward = torch.zeros(batch_dim, device=world.device)
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
-        self._outputs_cache = None  # (q, v, (distance, on_goal, observations)) of the last state
-        # every step computes the packages' status and the observations with its physics (in its compiled
-        # graph when compiled); after a reset or a setter the scenario computes them itself
-        kernel = functools.partial(state_outputs, n_packages=self.n_packages, length=self.package_length,
-                                   width=self.package_width)
-        self._outputs_handle, self._outputs_kernel = world.add_state_kernel(kernel), WorldKernel(world, kernel)
         return world
 
     # ------------------------------------------------------------------- reset
@@ -126,23 +118,15 @@ class Scenario(BaseScenario):
     def _package_pos(self) -> torch.Tensor:
         return torch.stack([p.state.pos for p in self.packages], dim=1)  # [B, P, 2]
 
+    def batched_outputs(self, q: torch.Tensor, v: torch.Tensor) -> tuple:
+        """``(distance [B, P], on_goal [B, P], observations [A, B, obs])`` from the planar state ``[3, N, B]``:
+        the packages' status for the reward and every agent's observation, in one pass."""
+        return state_outputs(q, v, self.n_packages, self.package_length, self.package_width)
+
     def _package_status(self):
         """Each package's distance to the goal and whether it overlaps it, both [B, P] (see :func:`package_status`)."""
-        distance, on_goal, _ = self._outputs()
+        distance, on_goal, _ = self.outputs()
         return distance, on_goal
-
-    def _outputs(self) -> tuple:
-        """``(distance [B, P], on_goal [B, P], observations [A, B, obs])`` of the current state, once per state."""
-        world = self.world
-        q, v = world.planar_state()
-        cached = self._outputs_cache
-        if cached is not None and cached[0] is q and cached[1] is v:
-            return cached[2]
-        outputs = world.take_state_kernel_output(self._outputs_handle)
-        if outputs is None:  # the state changed since the step (a reset, a setter)
-            outputs = self._outputs_kernel(q, v)
-        self._outputs_cache = (q, v, outputs)
-        return outputs
 
     def _paint(self) -> None:
         for package, color in zip(self.packages, pk.package_colors(self.on_goal).unbind(1)):
@@ -161,13 +145,7 @@ class Scenario(BaseScenario):
 
     # ------------------------------------------------------------- observation
     def observation(self, agent: Agent) -> torch.Tensor:
-        index = self._agent_index[agent.name]
-        observation = self._observations()[index]
-        if index == self.n_agents - 1:
-            # the environment asks in agent order: the next collection computes afresh, so observations
-            # handed out without a copy (fresh_observations) never alias a later collection's
-            self._outputs_cache = None
-        return observation
+        return self._observations()[self._agent_index[agent.name]]
 
     def _observations(self) -> torch.Tensor:
         """Every agent's observation ``[A, B, obs]``, computed once per state (see :func:`state_outputs`).
@@ -175,7 +153,7 @@ class Scenario(BaseScenario):
         Their delivered flags are the state's own, which ``on_goal`` holds
         once the state's reward (or reset) has been computed.
         """
-        return self._outputs()[2]
+        return self.outputs()[2]
 
     def done(self) -> torch.Tensor:
         return self.on_goal.all(dim=-1)
@@ -187,7 +165,7 @@ def package_status(q: torch.Tensor, n_packages: int, length: float, width: float
     ``q`` ``[3, N, B]`` with the goal first, then the packages. The test of
     ``World.is_overlapping`` (``geometry.disc_box_overlap_xy``) with the box
     boundary found in the box frame: equal to float rounding, in a fraction of
-    the passes. A pure function of tensors (run as a ``WorldKernel``).
+    the passes.
     """
     px, py, rot = q[0, 1 : 1 + n_packages], q[1, 1 : 1 + n_packages], q[2, 1 : 1 + n_packages]
     gx, gy = q[0, :1], q[1, :1]
@@ -200,8 +178,8 @@ def package_status(q: torch.Tensor, n_packages: int, length: float, width: float
 def state_outputs(q: torch.Tensor, v: torch.Tensor, n_packages: int, length: float, width: float) -> tuple:
     """``(distance [B, P], on_goal [B, P], observations [A, B, obs])`` from the planar state ``[3, N, B]``.
 
-    The scenario's state kernel (see ``World.add_state_kernel``): one pure
-    function of the state for the reward's status and all observations.
+    What ``Scenario.batched_outputs`` computes: one pure function of the state
+    for the reward's status and all observations.
     """
     distance, on_goal = package_status(q, n_packages, length, width)
     pos, vel = join_xy(q[0], q[1]), join_xy(v[0], v[1])  # [N, B, 2]: the goal, packages, agents
@@ -209,41 +187,18 @@ def state_outputs(q: torch.Tensor, v: torch.Tensor, n_packages: int, length: flo
 
 
 def observations(pos: torch.Tensor, vel: torch.Tensor, on_goal: torch.Tensor, n_packages: int) -> torch.Tensor:
-    """Every agent's observation ``[A, B, obs]`` from the stacked state ``[N, B, 2]`` (goal, packages, agents).
-
-    A pure function of tensors (run as a ``WorldKernel``). Eagerly it is
-    written into one tensor block by block; compiled, the same columns are
-    concatenated (the compiler turns the strided block writes into one
-    scalar loop, 6x slower than its own concatenation, which is 2x faster
-    than the eager writes).
-    """
-    if torch.compiler.is_compiling():
-        return _observations_by_cat(pos, vel, on_goal, n_packages)
-    packages, agents = pos[1 : 1 + n_packages].transpose(0, 1), pos[1 + n_packages :]  # [B, P, 2], [A, B, 2]
+    """Every agent's observation ``[A, B, obs]`` from the stacked state ``[N, B, 2]`` (goal, packages, agents):
+    its own position and velocity, then per package (offset from the goal, offset from the agent, velocity,
+    delivered)."""
+    packages, agents = pos[1 : 1 + n_packages], pos[1 + n_packages :]  # [P, B, 2], [A, B, 2]
     n_agents, batch = agents.shape[:2]
-    out = pos.new_empty(n_agents, batch, OWN_BLOCK + PACKAGE_BLOCK * n_packages)
-    out[..., 0:2] = agents
-    out[..., 2:4] = vel[1 + n_packages :]
-    blocks = out[..., OWN_BLOCK:].view(n_agents, batch, n_packages, PACKAGE_BLOCK)
-    blocks[..., 0:2] = packages - pos[0].unsqueeze(1)
-    blocks[..., 2:4] = packages.unsqueeze(0) - agents.unsqueeze(2)
-    blocks[..., 4:6] = vel[1 : 1 + n_packages].transpose(0, 1)
-    blocks[..., 6] = on_goal
-    return out
-
-
-def _observations_by_cat(pos: torch.Tensor, vel: torch.Tensor, on_goal: torch.Tensor, n_packages: int) -> torch.Tensor:
-    """:func:`observations` as one concatenation of broadcast columns (the compiled layout)."""
-    packages, agents = pos[1 : 1 + n_packages], pos[1 + n_packages :]
-    n_agents, batch = agents.shape[:2]
-    per_package = (n_agents, batch, n_packages)
-    own = torch.cat([agents, vel[1 + n_packages :]], dim=-1)  # [A, B, 4]
-    from_goal = (packages - pos[0]).transpose(0, 1).unsqueeze(0).expand(*per_package, 2)
-    from_agent = (packages.unsqueeze(0) - agents.unsqueeze(1)).permute(0, 2, 1, 3)
-    package_vel = vel[1 : 1 + n_packages].transpose(0, 1).unsqueeze(0).expand(*per_package, 2)
-    delivered = on_goal.to(pos.dtype).unsqueeze(-1).unsqueeze(0).expand(*per_package, 1)
-    blocks = torch.cat([from_goal, from_agent, package_vel, delivered], dim=-1)  # [A, B, P, 7]
-    return torch.cat([own, blocks.flatten(2)], dim=-1)
+    blocks = cat_columns([
+        (packages - pos[0]).transpose(0, 1).unsqueeze(0),
+        (packages.unsqueeze(0) - agents.unsqueeze(1)).permute(0, 2, 1, 3),
+        vel[1 : 1 + n_packages].transpose(0, 1).unsqueeze(0),
+        on_goal.to(pos.dtype).unsqueeze(-1).unsqueeze(0),
+    ], (n_agents, batch, n_packages))  # [A, B, P, PACKAGE_BLOCK]
+    return cat_columns([agents, vel[1 + n_packages :], blocks.flatten(2)], (n_agents, batch))
 
 
 class HeuristicPolicy(BaseHeuristicPolicy):

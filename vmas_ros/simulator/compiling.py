@@ -17,7 +17,7 @@ from typing import Callable, Dict, Hashable, Optional, Sequence
 
 import torch
 
-__all__ = ["own_copy", "compile_for_world", "LayoutCompiled", "WorldKernel"]
+__all__ = ["own_copy", "compile_for_world", "LayoutCompiled", "StateFunction", "WorldKernel"]
 
 
 def own_copy(fn: Callable) -> Callable:
@@ -180,3 +180,36 @@ class WorldKernel:
             self._compiled = compile_for_world(self._fn, world.compile_mode, arguments_only=True)
             self._mode = world.compile_mode
         return self._compiled(*args, **kwargs)
+
+
+class StateFunction:
+    """A pure function of the planar state ``fn(q, v)``, evaluated at most once per state.
+
+    What scenarios' ``batched_outputs`` hook runs on (see ``BaseScenario.outputs``).
+    A compiled step evaluates it right after its physics, in the same graph;
+    otherwise (eager steps, and after a reset or a setter changed the state)
+    it runs when first asked for, as a :class:`WorldKernel`. The result is kept
+    for the state it was computed from, matched by the identity of
+    ``world.planar_state()``'s tensors, which every change of state replaces.
+    """
+
+    def __init__(self, world, fn: Callable) -> None:
+        self._world = world
+        self._handle = world.add_state_kernel(fn)
+        self._kernel = WorldKernel(world, fn)
+        self._last = None  # (q, v, output) of the last state asked for
+
+    def __call__(self):
+        q, v = self._world.planar_state()
+        last = self._last
+        if last is not None and last[0] is q and last[1] is v:
+            return last[2]
+        output = self._world.take_state_kernel_output(self._handle)
+        if output is None:  # an eager step, or the state changed since the step
+            output = self._kernel(q, v)
+        self._last = (q, v, output)
+        return output
+
+    def forget(self) -> None:
+        """Compute afresh when next asked, even for the same state (what was handed out stays theirs)."""
+        self._last = None

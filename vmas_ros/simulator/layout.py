@@ -92,6 +92,27 @@ def join_xy(x: Tensor, y: Tensor) -> Tensor:
     return torch.stack([x, y], dim=-1)
 
 
+def cat_columns(parts: Sequence[Tensor], leading: Sequence[int]) -> Tensor:
+    """``torch.cat`` along the last dim of ``parts``, each broadcast to ``(*leading, its width)`` (exact copies).
+
+    For observation layouts built from blocks that share a prefix (an agent's
+    own state, then one block per package). Eagerly each part is written into
+    its columns of one new tensor, with no expanded copies; under
+    ``torch.compile`` it is one concatenation of expanded views, which the
+    compiler fuses (strided column writes compile to a scalar loop).
+    """
+    leading = tuple(leading)
+    if torch.compiler.is_compiling():
+        return torch.cat([part.expand(*leading, part.shape[-1]) for part in parts], dim=-1)
+    out = parts[0].new_empty(*leading, sum(part.shape[-1] for part in parts))
+    column = 0
+    for part in parts:
+        width = part.shape[-1]
+        out[..., column:column + width] = part
+        column += width
+    return out
+
+
 def as_pairs(vectors: Tensor) -> Tensor:
     """``[..., 2]`` float vectors viewed as ``[...]`` complex numbers, one per ``(x, y)`` pair (no copy).
 

@@ -31,6 +31,7 @@ class BaseScenario(abc.ABC):
 
     def __init__(self) -> None:
         self._world = None
+        self._outputs = None  # the batched_outputs hook as the engine runs it, when defined
         self.viewer_size = INITIAL_VIEWER_SIZE
         self.viewer_zoom = VIEWER_DEFAULT_ZOOM
         self.render_origin = (0.0, 0.0)
@@ -53,7 +54,17 @@ class BaseScenario(abc.ABC):
     # -- called by the environment; do not override --------------------------
     def env_make_world(self, batch_dim: int, device, **kwargs):
         self._world = self.make_world(batch_dim, device, **kwargs)
+        if type(self).batched_outputs is not BaseScenario.batched_outputs:
+            from vmas_ros.simulator.compiling import StateFunction
+
+            self._outputs = StateFunction(self._world, self.batched_outputs)
         return self._world
+
+    def env_observations_handed_out(self) -> None:
+        # observations that are views of batched_outputs' result go out without a copy: the next
+        # collection computes afresh, so two collections never share memory
+        if self._outputs is not None:
+            self._outputs.forget()
 
     def env_reset_world_at(self, env_index) -> None:
         self.world.reset(env_index)
@@ -73,6 +84,27 @@ class BaseScenario(abc.ABC):
     @abc.abstractmethod
     def reset_world_at(self, env_index: Optional[int] = None) -> None:
         """Reset env ``env_index``, or every env when it is None."""
+
+    # -- optional: state-wide outputs ------------------------------------------
+    def batched_outputs(self, q: Tensor, v: Tensor):
+        """Optional: everything the rewards, observations and dones read, computed from the state at once.
+
+        ``q``, ``v``: every entity's (x, y, angle) and (vx, vy, angular
+        velocity), each ``[3, n_entities, B]`` in ``world.entities``
+        order (landmarks, then agents, each as added; see ``World.planar_state``). Return
+        any tensors (a tuple, a dict). Must be a pure function of its
+        arguments and of settings fixed at ``make_world``: the engine decides
+        when it runs and may compile it with the physics. Read the result in
+        ``reward``/``observation``/``done`` with :meth:`outputs`.
+        """
+        raise NotImplementedError
+
+    def outputs(self):
+        """The value of :meth:`batched_outputs` for the world's current state, computed at most once per state
+        (by the step itself, in the same compiled graph, when the world compiles its physics)."""
+        if self._outputs is None:
+            raise RuntimeError(f"{type(self).__name__}.outputs(): the scenario does not define batched_outputs")
+        return self._outputs()
 
     @abc.abstractmethod
     def observation(self, agent):
