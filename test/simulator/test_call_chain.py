@@ -37,12 +37,11 @@ def _from_env_step(chain: Chain) -> Chain:
     return chain[starts[-1]:]
 
 
-def _eager_chain(env) -> Chain:
-    seen: List[Chain] = []
-
+def _step_profiled(env, on_call) -> None:
+    """One random step of ``env`` with ``on_call(frame)`` called for every Python function call."""
     def profile(frame, event, arg):
-        if event == "call" and frame.f_code is integrator.integrate.__code__:
-            seen.append(_package_frames(frame))
+        if event == "call":
+            on_call(frame)
 
     actions = env.get_random_actions()
     sys.setprofile(profile)
@@ -50,6 +49,12 @@ def _eager_chain(env) -> Chain:
         env.step(actions)
     finally:
         sys.setprofile(None)
+
+
+def _eager_chain(env) -> Chain:
+    seen: List[Chain] = []
+    _step_profiled(env, lambda frame: frame.f_code is integrator.integrate.__code__
+                   and seen.append(_package_frames(frame)))
     assert seen, "the integrator never ran"
     return _from_env_step(seen[0])
 
@@ -58,18 +63,13 @@ def _compiled_entry(env) -> Chain:
     """The package frames under which the compiled step runs (torch's frame evaluation called from them)."""
     seen: List[Chain] = []
 
-    def profile(frame, event, arg):
-        if event == "call" and f"torch{os.sep}_dynamo" in frame.f_code.co_filename:
+    def on_call(frame):
+        if f"torch{os.sep}_dynamo" in frame.f_code.co_filename:
             chain = _package_frames(frame)
             if chain and chain[-1][1] == "advance":
                 seen.append(chain)
 
-    actions = env.get_random_actions()
-    sys.setprofile(profile)
-    try:
-        env.step(actions)
-    finally:
-        sys.setprofile(None)
+    _step_profiled(env, on_call)
     assert seen, "no compiled step was entered"
     return _from_env_step(max(seen, key=len))
 

@@ -5,7 +5,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator import geometry as geo
-from vmas_ros.simulator.physics.collision.contact import PairForces, Pushes, cross, rows, solid_inner, with_torques
+from vmas_ros.simulator.physics.collision.contact import PairForces, Pushes, centres, cross, rows, solid_inner, with_torques
 from vmas_ros.simulator.physics.types import StepParams
 from vmas_ros.simulator.tables import PairTable
 from vmas_ros.simulator.utils import LINE_MIN_DIST
@@ -15,7 +15,7 @@ def forces(pair: PairTable, q: Tensor, params: StepParams, exact: bool) -> PairF
     """Forces and torques ``[3, P, B]`` on both boxes, from ``q`` ``[3, N, B]`` (always VMAS's rounding:
     the candidate search picks among near-equal distances)."""
     p, ia, ib = pair.params, pair.index_a, pair.index_b
-    xa, ya, xb, yb = rows(q[0], ia), rows(q[1], ia), rows(q[0], ib), rows(q[1], ib)
+    xa, ya, xb, yb = centres(pair, q)
     push = Pushes(xa - xb, ya - yb, p["reach"], params)
     on_a, on_b = geo.closest_points_box_box(
         torch.stack([xa, ya], dim=-1), rows(q[2], ia), p["a_length"], p["a_width"],

@@ -8,7 +8,7 @@ from __future__ import annotations
 from torch import Tensor
 
 from vmas_ros.simulator import geometry as geo
-from vmas_ros.simulator.physics.collision.contact import PairForces, Pushes, cross, rows, solid_inner, with_torques
+from vmas_ros.simulator.physics.collision.contact import PairForces, Pushes, centres, cross, rows, solid_inner, with_torques
 from vmas_ros.simulator.physics.types import StepParams
 from vmas_ros.simulator.tables import PairTable
 from vmas_ros.simulator.utils import LINE_MIN_DIST
@@ -23,7 +23,7 @@ def forces(pair: PairTable, q: Tensor, params: StepParams, exact: bool) -> PairF
     rounding, in far fewer passes.
     """
     p, ia, ib = pair.params, pair.index_a, pair.index_b
-    xa, ya, xb, yb = rows(q[0], ia), rows(q[1], ia), rows(q[0], ib), rows(q[1], ib)
+    xa, ya, xb, yb = centres(pair, q)
     push = Pushes(xa - xb, ya - yb, p["reach"], params, length=geo.norm_xy if exact else geo.hypot_xy)
     closest = geo.closest_point_on_box_boundary_xy if exact else geo.closest_point_on_box_boundary_in_frame
     sx, sy = closest(xa, ya, rows(q[2], ia), p["a_length"], p["a_width"], xb, yb)

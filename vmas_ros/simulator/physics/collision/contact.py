@@ -50,6 +50,12 @@ def rows(t: Tensor, index: Tensor) -> Tensor:
     return torch.index_select(t, 0, index)
 
 
+def centres(pair, q: Tensor) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
+    """The centres ``(xa, ya, xb, yb)`` of every pair's two members, each ``[P, B]``, from ``q`` ``[3, N, B]``."""
+    ia, ib = pair.index_a, pair.index_b
+    return rows(q[0], ia), rows(q[1], ia), rows(q[0], ib), rows(q[1], ib)
+
+
 def cross(rx: Tensor, ry: Tensor, fx: Tensor, fy: Tensor) -> Tensor:
     """Torque ``r x f`` of force ``f`` applied at lever arm ``r``."""
     return rx * fy - ry * fx
