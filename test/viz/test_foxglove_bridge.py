@@ -14,7 +14,6 @@ import math
 import os
 import queue
 import socket
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +24,10 @@ pytest.importorskip("foxglove")
 import websockets  # noqa: E402  (test extra: a real Foxglove WebSocket client)
 
 import vmas_ros  # noqa: E402
-from vmas_ros.policy.protobuf_wire import read_fields, read_varint  # noqa: E402
 from vmas_ros.ros import convert  # noqa: E402
 from vmas_ros.simulator.sensors import Lidar  # noqa: E402
 from test.foxglove_client import SUBPROTOCOL, WAIT, FoxClient, twist_json  # noqa: E402
+from test.viz.protobuf_decode import decode, schema_descriptors  # noqa: E402
 from vmas_ros.viz.foxglove_bridge import MAX_CLIENT_MESSAGE_BYTES, FoxgloveBridge, parse_twist  # noqa: E402
 
 pytestmark = pytest.mark.timeout(60)
@@ -89,79 +88,6 @@ def bridge(sim, twists):
     with FoxgloveBridge(port=0, agent_names=sim["names"], on_twist=twists) as b:
         yield b
     assert b.closed
-
-
-# ------------------------------------------------------------------ protobuf reader
-def _descriptors(file_descriptor_set: bytes) -> dict:
-    """Full message name -> {field number: (name, type, type_name, repeated)} from a FileDescriptorSet."""
-    messages = {}
-
-    def message(buf, scope):
-        name, fields = None, {}
-        nested = []
-        for number, _, value in read_fields(buf):
-            if number == 1:
-                name = value.decode()
-            elif number == 2:  # FieldDescriptorProto
-                f = {n: v for n, _, v in read_fields(value)}
-                fields[f[3]] = (f[1].decode(), f.get(5), f.get(6, b"").decode().lstrip("."), f.get(4) == 3)
-            elif number == 3:
-                nested.append(value)
-        full = f"{scope}.{name}" if scope else name
-        messages[full] = fields
-        for buf_nested in nested:
-            message(buf_nested, full)
-
-    for number, _, file_buf in read_fields(file_descriptor_set):
-        if number != 1:
-            continue
-        package = ""
-        bodies = []
-        for n, _, v in read_fields(file_buf):
-            if n == 2:
-                package = v.decode()
-            elif n == 4:
-                bodies.append(v)
-        for body in bodies:
-            message(body, package)
-    return messages
-
-
-_SCALAR = {1: "<d", 2: "<f", 6: "<Q", 7: "<I", 15: "<i", 16: "<q"}
-
-
-def decode(descriptors: dict, type_name: str, buf: bytes) -> dict:
-    fields = descriptors[type_name]
-    out = {}
-    for number, wire, raw in read_fields(buf):
-        if number not in fields:
-            continue
-        name, ftype, sub, repeated = fields[number]
-        if ftype == 11:
-            values = [decode(descriptors, sub, raw)]
-        elif ftype == 9:
-            values = [raw.decode()]
-        elif ftype == 12:
-            values = [raw]
-        elif ftype in _SCALAR:
-            fmt = _SCALAR[ftype]
-            if wire == 2:  # packed
-                size = struct.calcsize(fmt)
-                values = [struct.unpack(fmt, raw[k:k + size])[0] for k in range(0, len(raw), size)]
-            else:
-                values = [struct.unpack(fmt, raw)[0]]
-        else:  # varint kinds (int, uint, bool, enum)
-            values = [raw] if wire == 0 else []
-            if wire == 2:
-                k = 0
-                while k < len(raw):
-                    v, k = read_varint(raw, k)
-                    values.append(v)
-        if repeated:
-            out.setdefault(name, []).extend(values)
-        else:
-            out[name] = values[-1]
-    return out
 
 
 def run(coro):
@@ -238,7 +164,7 @@ def collect(bridge, sim, topics, which=-1):
     decoded = {}
     for topic, sub_id in subs.items():
         channel = client.channels[topic]
-        descriptors = _descriptors(base64.b64decode(channel["schema"]))
+        descriptors = schema_descriptors(base64.b64decode(channel["schema"]))
         log_time, payload = client.data[sub_id][which]
         assert payload, topic
         assert log_time in published_times
