@@ -7,6 +7,9 @@
 - No text speaks of how the work was organised (issues, sessions, commit
   hashes): not README.md, not docs/**/*.md, not the strings and comments of
   vmas_ros/ (vmas_ros/cli.py is left to its own clean-up).
+- The comments and docstrings of vmas_ros/ carry no measurements (times,
+  memory sizes, speed-up factors, before -> after figures): those go stale, so
+  they live in docs/bench/ with the command that produced them.
 - Every ``vmas-ros`` subcommand (read from the real argparse parser) has its
   section in docs/cli.md, and each of its options is documented somewhere.
 - The parameter tables of docs/node.md and docs/policy_node.md list exactly the
@@ -15,6 +18,7 @@
 from __future__ import annotations
 
 import argparse
+import ast
 import io
 import re
 import tokenize
@@ -43,6 +47,28 @@ FORBIDDEN = [
 ]
 #: vmas_ros/cli.py is cleaned up separately
 CODE_EXEMPT = {ROOT / "vmas_ros" / "cli.py"}
+
+#: what a measurement looks like in a comment or docstring; ``\s*`` lets a figure wrap onto the next line
+_NUMBER = r"(?<![\w.,])\d(?:[\d,]*\d)?(?:\.\d+)?"  # not the 64 of int64
+_WORD_FACTOR = r"(?:two|three|four|five|six|seven|eight|nine|ten|twenty|a hundred)"
+MEASUREMENTS = [
+    (re.compile(_NUMBER + r"\s*(?:us|µs|μs|ns|ms|microseconds?|milliseconds?|nanoseconds?)\b"), "a time"),
+    (re.compile(_NUMBER + r"\s*(?:[KMGT]i?B|kB|bytes? of (?:memory|RSS))\b"), "a memory size"),
+    (re.compile(_NUMBER + r"x\b"), "a speed-up factor"),  # 4x, 2.3x (not 3x3, 0x1f, 2 x 3)
+    (re.compile(r"\b(?:" + _NUMBER + "|" + _WORD_FACTOR + r")\s*(?:x|times)\s+(?:faster|slower|quicker|the speed)\b",
+                re.I), "a speed-up factor"),
+    (re.compile(r"\border of magnitude\s+(?:faster|slower)", re.I), "a speed-up factor"),
+    (re.compile(_NUMBER + r"\s*(?:->|→)\s*" + _NUMBER + r"\s*(?:steps|messages|calls|checks)?\s*(?:/s|per|a |%)"),
+     "a before -> after figure"),
+    (re.compile(_NUMBER + r"\s*(?:steps|messages|frames)\s*(?:/s|a second|per second)\b"), "a rate"),
+    (re.compile(_NUMBER + r"\s*%\s+of\s+(?:the\s+|a\s+|its\s+)?(?:\w+\s+)?(?:time|step|cost|runtime)\b"),
+     "a share of time"),
+]
+#: (path under vmas_ros/, text matched) -> why that text is not a measurement
+MEASUREMENT_ALLOWED = {
+    ("viz/foxglove_bridge.py", "64 KiB"): "the size limit of a client message, set by the WebSocket library",
+    ("viz/foxglove_bridge.py", "16 MiB"): "the frame limit at which the WebSocket library drops a client",
+}
 
 _FENCE = re.compile(r"^(```|~~~)")
 _LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
@@ -140,10 +166,76 @@ def test_code_strings_and_comments_do_not_speak_of_issues_sessions_or_commits():
     assert not hits, "\n".join(hits)
 
 
+def _docstrings_and_comments(source: str) -> Iterator[Tuple[int, str]]:
+    """(first line, text) of every docstring (any string statement) and every run of comment lines."""
+    for node in ast.walk(ast.parse(source)):
+        if (isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+                and isinstance(node.value.value, str)):
+            yield node.lineno, node.value.value
+    block: List[Tuple[int, str]] = []
+    for token in tokenize.generate_tokens(io.StringIO(source).readline):
+        if token.type != tokenize.COMMENT:
+            continue
+        if block and token.start[0] != block[-1][0] + 1:
+            yield block[0][0], "\n".join(text for _, text in block)
+            block = []
+        block.append((token.start[0], token.string.lstrip("#:").strip()))
+    if block:
+        yield block[0][0], "\n".join(text for _, text in block)
+
+
+def _measurement_hits(text: str) -> Iterator[Tuple[int, str, str]]:
+    """(line offset in ``text``, what kind, matched text) of each measurement-like figure, once per figure."""
+    taken: List[range] = []
+    for pattern, what in MEASUREMENTS:
+        for match in pattern.finditer(text):
+            if any(match.start() in span or span.start in range(*match.span()) for span in taken):
+                continue  # "5x slower" is one figure, not two
+            taken.append(range(*match.span()))
+            yield text.count("\n", 0, match.start()), what, " ".join(match.group(0).split())
+
+
+def test_code_comments_and_docstrings_carry_no_measurements():
+    hits, allowed_seen = [], set()
+    sources = sorted((ROOT / "vmas_ros").rglob("*.py"))
+    assert len(sources) > 50, "the package's sources were not found"
+    for source in sources:
+        name = source.relative_to(ROOT / "vmas_ros").as_posix()
+        for line, text in _docstrings_and_comments(source.read_text(encoding="utf-8")):
+            for offset, what, found in _measurement_hits(text):
+                if (name, found) in MEASUREMENT_ALLOWED:
+                    allowed_seen.add((name, found))
+                    continue
+                hits.append(f"vmas_ros/{name}:{line + offset}: {what}: {found!r}")
+    assert not hits, ("measurements in comments or docstrings (say why in words; figures go in docs/bench/ "
+                      "with their command):\n" + "\n".join(hits))
+    stale = set(MEASUREMENT_ALLOWED) - allowed_seen
+    assert not stale, f"MEASUREMENT_ALLOWED entries that no longer match anything: {sorted(stale)}"
+
+
 def test_the_checks_catch_what_they_look_for():
     """The patterns and the link parser find the things the tests above forbid or follow."""
     assert len(list(_forbidden_hits("the suite (issue 7) at d362827, this session's session-start code"))) == 4
     assert not list(_forbidden_hits("a warning is issued; sha256 of 1234567 bytes; decade"))
+    planted = (
+        '"""A module.\n\nSwapping the streams costs about 0.2\n    ms, and the import holds 30 MB."""\n'
+        "# index_add_ alpha=-1 takes a slow path here (~9x at 1,000 agents)\n"
+        "# and the batched cast runs about 2.3x faster over [pairs, envs]\n"
+        "def f():\n"
+        '    """Ran 5x slower than eager; three times faster with it; 1,170 -> 1,850 steps/s."""\n'
+        '    parser.add_argument("--timeout", help="timeout in ms, default 4 ms; 2.3x")  # 40 us a call\n'
+    )
+    found = [(line + offset, what) for line, text in _docstrings_and_comments(planted)
+             for offset, what, _ in _measurement_hits(text)]
+    assert sorted(found) == sorted([
+        (3, "a time"), (4, "a memory size"), (5, "a speed-up factor"), (6, "a speed-up factor"),
+        (8, "a speed-up factor"), (8, "a speed-up factor"), (8, "a before -> after figure"),
+        (9, "a time")]), found  # the help string is not a docstring: its units describe a parameter
+    assert [what for _, what, _ in _measurement_hits("3,175 steps/s; 40% of the step")] == ["a rate", "a share of time"]
+    legitimate = ("16 rays over 8,192 elements at 30,000 envs; a 0.32 x 0.24 box in a 2 x 3 grid; a 3x3 matrix; "
+                  "gymnasium 1.x; ray 2.x; a 0.1 s step; int64 ns; [N, 1, 1] -> [N, 1]; int64 -> int32; "
+                  "~80% covered; several rounds per step")
+    assert list(_measurement_hits(legitimate)) == []
     assert _slug("Recovering a bag: `vmas-ros bag-recover`") == "recovering-a-bag-vmas-ros-bag-recover"
     assert _slug("VMAS's own scenario files") == "vmass-own-scenario-files"
     page = "see [a](docs/a.md#x), ![b](img/b.gif) and [`c`](c.md)\n```\n[d](not_a_link.md)\n```\n"

@@ -13,8 +13,8 @@ windows of ``--duration`` seconds each; steps/s is the median over the windows.
 Each window is followed by a profiled one of the same length, in which the
 node's ``StepPhases`` splits each step into actions, engine (``env.step``),
 lidar, conversion (snapshot + message fill) and publish, the rest of the wall
-time being the executor: its timers cost the node a few percent, so steps/s
-comes from the plain windows (the node as users run it) and the parts from the
+time being the executor: its timers slow the node down, so steps/s comes
+from the plain windows (the node as users run it) and the parts from the
 profiled ones (``profiled_steps_per_s`` says what the timed node managed).
 Results go to ``node_benchmark.{csv,json,md}``.
 Benchmarks measure; tests never assert on these numbers.

@@ -60,7 +60,7 @@ def live_tensor_bytes(device: torch.device) -> int:
     allocator keeps no count, so we walk the garbage collector's objects and sum
     the distinct storages of live tensors: a tensor leak (a list that keeps every
     step's output) shows here long before it is visible in a noisy RSS. The walk
-    costs tens of milliseconds, which is why it runs once per sample interval.
+    is slow, which is why it runs once per sample interval.
     """
     if device.type == "cuda":
         return int(torch.cuda.memory_allocated(device))
@@ -92,9 +92,9 @@ def growth_mb(values: Sequence[float], warmup_index: int) -> float:
     """Growth of a memory series after warm-up: median of its last quarter minus median of its first quarter.
 
     Medians over quarters (at least one sample each), not single samples: the RSS
-    of a torch process swings by 10-20 MB as the allocator returns and takes back
-    pages, and a single transient (a bag chunk being flushed, a temporary during a
-    reset) must neither hide nor fake a trend. A leak moves both medians apart.
+    of a torch process swings as the allocator returns and takes back pages, and
+    a single transient (a bag chunk being flushed, a temporary during a reset)
+    must neither hide nor fake a trend. A leak moves both medians apart.
     """
     tail = list(values[warmup_index:])
     if len(tail) < 2:

@@ -110,9 +110,9 @@ class Environment:
     def _own_rng(self, host_streams: bool = True):
         """Run scenario code with this env's RNG streams, then restore the caller's.
 
-        Swapping numpy's and Python's global states costs about 0.2 ms, more than a
-        whole step at small batch sizes, so ``step`` swaps only torch's streams
-        (where scenarios draw noise); construction, resets, random actions and
+        Swapping numpy's and Python's global states costs more than a whole
+        step at small batch sizes, so ``step`` swaps only torch's streams (where
+        scenarios draw noise); construction, resets, random actions and
         queries swap all three (where scenarios place entities).
         """
         saved = self._capture_rng()

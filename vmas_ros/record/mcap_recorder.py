@@ -41,7 +41,7 @@ Signals
     ``hold()`` and ``release()`` methods (sim_node's, from
     :mod:`vmas_ros.ros.startup`) is not swapped but asked to hold the signal
     itself, which keeps a C-level handler chained in front of it (rclpy's, which
-    wakes the executor) installed. That costs a few microseconds per write;
+    wakes the executor) installed. That costs a little on every write;
     :meth:`McapRecorder.batch` pays it once for a group of writes.
 """
 from __future__ import annotations

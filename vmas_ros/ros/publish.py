@@ -1,8 +1,8 @@
 """sim_node's per-step state topics, converted in bulk and published as pre-serialised bytes.
 
-Why bytes: filling an rclpy message field by field costs about a microsecond per
-field in Python, and ``publish(msg)`` then converts the whole object to C again
-(a MarkerArray of eight markers: ~140 us per publish). Yet from one step to the
+Why bytes: filling an rclpy message field by field is slow in Python, and
+``publish(msg)`` then converts the whole object to C again, which makes a
+MarkerArray the dearest message of all. Yet from one step to the
 next only numbers change: frame ids, marker shapes and array lengths stay put,
 so the serialised (CDR) layout of every message is fixed once the node is built.
 
@@ -275,9 +275,9 @@ class StatePublisher:
         # no default event handlers: they cost every executor round (QosAudit warns instead)
         self.publishers = [node.create_publisher(classes[kind], topic, qos, event_callbacks=quiet_publisher_events())
                            for topic, kind in zip(messages.topics, messages.types)]
-        # rclpy's Publisher.publish takes its handle's lock and type-checks each message: half of the cost of
-        # publishing bytes (13 messages: 18 -> 9 us). The node publishes and destroys its publishers on one
-        # thread, never at once, so it calls the bound rcl publisher directly where this rclpy has one.
+        # rclpy's Publisher.publish takes its handle's lock and type-checks each message, a large share of
+        # the cost of publishing bytes. The node publishes and destroys its publishers on one thread,
+        # never at once, so it calls the bound rcl publisher directly where this rclpy has one.
         raw = [getattr(p, "_Publisher__publisher", None) for p in self.publishers]
         self._send = [r.publish_raw for r in raw] if all(hasattr(r, "publish_raw") for r in raw) else \
             [p.publish for p in self.publishers]

@@ -2,9 +2,9 @@
 
 After every step sim_node needs one env's state and every lidar scan on the
 host (``convert.Snapshot``). Gathering them after the step takes a dozen small
-tensor calls, a lidar cast and the Python around them: at one env that was
-about 80 us, more than half of the compiled step's own time. Registered as
-one of the world's state kernels (``World.add_state_kernel``), the gather and
+tensor calls, a lidar cast and the Python around them: at one env that is
+comparable to the compiled step's own time. Registered as one of the
+world's state kernels (``World.add_state_kernel``), the gather and
 the casts become part of the step's graph, and taking the snapshot is one
 tensor handed out by the step, read as NumPy.
 

@@ -141,7 +141,7 @@ class SimNode(StepLoop, Node):
         p = self.params
         if p.num_envs <= 256 and torch.get_num_threads() > 1:
             # small batches gain nothing from intra-op threads, and on a busy machine
-            # contended threads make tiny kernels take milliseconds: keep one
+            # contended threads make tiny kernels wait on each other: keep one
             torch.set_num_threads(1)
         try:
             device = resolve_device(p.device)

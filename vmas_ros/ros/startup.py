@@ -1,7 +1,7 @@
 """Signals during a node's start-up: a clean exit 0 from the first milliseconds on.
 
-Why: ``sim_node`` spends its first second or two importing torch, rclpy and
-the engine. Python's default handlers make a SIGINT there a KeyboardInterrupt
+Why: ``sim_node`` spends its start-up importing torch, rclpy and the engine.
+Python's default handlers make a SIGINT there a KeyboardInterrupt
 traceback raised from inside some import (exit 1, or death by SIGINT; seen
 once leaving the process hung on an import lock) and a SIGTERM plain death by
 signal (-15). A launch file or supervisor that stops a node right after

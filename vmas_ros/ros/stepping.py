@@ -5,11 +5,12 @@ checked for finiteness) and then emitted (messages filled and published, the
 bag written). Unpaced, a timer callback steps for the ``unpaced_batch_ms``
 parameter's wall time, computing up to ``UNPACED_BURST`` steps back to back
 before it emits them, in order, each with its own stamp: a step interleaved
-with publishing ran about 1.2x slower than back to back (the publishing
-between steps evicts the step's code and data from the caches), and subscribers receive every step either way. A step that fails is reported
-(``SimulationFault``, naming the step and the part) only after the steps
-computed before it went out, so the bag and the subscribers end at the last
-good step, as they would one step at a time.
+with publishing runs slower than back to back (the publishing between steps
+evicts the step's code and data from the caches), and subscribers receive
+every step either way. A step that fails is reported (``SimulationFault``,
+naming the step and the part) only after the steps computed before it went
+out, so the bag and the subscribers end at the last good step, as they would
+one step at a time.
 """
 from __future__ import annotations
 
@@ -48,7 +49,7 @@ class StepLoop:
         if self._timer.timer_period_ns != 0:
             self.step_once()
             return
-        # unpaced: one executor round costs about as much as half a step, so keep stepping for about
+        # unpaced: one executor round is dear next to a step, so keep stepping for about
         # unpaced_batch_ms of wall time; commands and services wait about that long at most
         end = time.perf_counter() + self.params.unpaced_batch_ms / 1000.0
         while True:

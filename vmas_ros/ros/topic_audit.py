@@ -117,9 +117,9 @@ class TopicAudit(_GraphAudit):
 def quiet_publisher_events():
     """Event callbacks for a publisher without rclpy's default QoS/type event handlers.
 
-    Every handler is a waitable that each executor round walks in Python: the
-    ~30 of sim_node's per-step topics made one round of the unpaced node cost
-    340 us instead of 110 (with several rounds per millisecond of stepping).
+    Every handler is a waitable that each executor round walks in Python: with
+    one per sim_node topic, they made each round of the unpaced node several
+    times dearer, and the unpaced node runs many rounds while it steps.
     What they would warn about is audited instead, every few seconds
     (:meth:`QosAudit.check` for the published topics, :class:`TopicAudit` for
     the subscribed ones, whose best-effort QoS accepts any publisher).

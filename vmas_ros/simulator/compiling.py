@@ -76,7 +76,7 @@ _BOUND = frozenset({"_bound_func", "_bound_args", "_bound_keywords"})
 
 def _direct_arguments(entries) -> list:
     """A ``guard_filter_fn`` keeping the guards on the call's own arguments and the global ones: not those
-    on a partial's bound constants or a bound method's attributes (a lidar kernel: 80 checks per call)."""
+    on a partial's bound constants or a bound method's attributes (a lidar kernel has dozens)."""
     return [entry.guard_type in _GLOBAL_GUARDS or (bool(_ARGUMENT.fullmatch(entry.name)) and entry.name not in _BOUND)
             for entry in entries]
 
@@ -129,9 +129,9 @@ class LayoutCompiled:
     """``fn`` compiled once per layout, checking only its direct tensor arguments on each call.
 
     Dynamo guards everything a traced function reads: for the world's step,
-    every table, constant and scenario attribute, about 360 checks, which at
-    one env cost 20-25 us of a 150 us ``env.step``. What those reads can be is
-    known here: the world rebuilds its tables (a new object) whenever an
+    every table, constant and scenario attribute: hundreds of checks, a large
+    share of a one-env ``env.step``. What those reads can be is known here: the
+    world rebuilds its tables (a new object) whenever an
     entity or a property changes, and its step parameters are plain values.
     So ``key(*args)`` names the layout, each layout gets its own compiled
     copy, and its guards are cut to the shapes, dtypes and devices of the

@@ -60,8 +60,8 @@ def _as_tensor(x: Scalar, like: Tensor) -> Tensor:
 def broadcast_shape(*shapes: Sequence[int]) -> Tuple[int, ...]:
     """The shape ``shapes`` broadcast to, in plain Python (raises ValueError if they do not).
 
-    ``torch.broadcast_shapes`` imports sympy on first use: about 30 MB of
-    resident memory that a simulation never needs.
+    ``torch.broadcast_shapes`` imports sympy on first use, whose resident
+    memory a simulation never needs.
     """
     n = max([len(shape) for shape in shapes] + [0])  # (a list, not a generator: torch.compile traces this)
     result = [1] * n
@@ -132,7 +132,7 @@ def dot2(a: Tensor, b: Tensor) -> Tensor:
     """Dot product of ``[..., 2]`` vectors -> ``[...]``.
 
     Bit-equal to ``(a * b).sum(-1)`` (a sum of two terms rounds once either way)
-    and about three times faster: torch's reduction over a trailing dim of two
+    and far faster: torch's reduction over a trailing dim of two
     is far slower than two products and an add.
     """
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
@@ -263,10 +263,9 @@ def closest_point_on_box_boundary_xy(
     :func:`closest_point_on_segment` on that side, and the first side in
     :func:`box_edges` order wins ties. Two bit-identical layouts, chosen by size
     (this kernel is the box-sphere contact of every substep): small batches stack
-    the four sides on a leading dim and pick with one ``argmin`` (fewer ops:
-    about 4x faster at one env); large ones keep a running minimum over the sides
-    on separate x/y tensors (there ``argmin`` and ``gather`` over big stacks cost
-    more than the extra ops: about 2.5x faster at 10,000 envs).
+    the four sides on a leading dim and pick with one ``argmin`` (fewer ops);
+    large ones keep a running minimum over the sides on separate x/y tensors
+    (there ``argmin`` and ``gather`` over big stacks cost more than the extra ops).
     """
     n = max(t.numel() for t in (cx, cy, px, py, torch.as_tensor(rot)))
     if n <= _STACKED_SIDES_MAX_ELEMENTS:

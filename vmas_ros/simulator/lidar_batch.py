@@ -2,8 +2,8 @@
 
 ``Lidar.measure`` casts one agent's rays against its targets: with four agents
 that is four rounds of the same dozen small tensor ops, and at one env each op
-is pure overhead (~40-90 us a round here). Callers that need every lidar every
-step (sim_node) cast them together: rays ``[L, B, R]`` of all L lidars against the
+is pure overhead. Callers that need every lidar every step (sim_node) cast them
+together: rays ``[L, B, R]`` of all L lidars against the
 union of their targets ``[E, ...]``, each lidar's non-targets masked out before
 the nearest hit is taken. The intersection functions are the engine's own
 (``vmas_ros.simulator.raycast``), elementwise, so every (lidar, target, ray)
@@ -130,8 +130,8 @@ def cast_together(world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
 
 #: AgentLidars casts all lidars together while envs x rays is at most this (measured: faster below, slower above)
 BATCH_BELOW_ELEMENTS = 8192
-#: the same for compiled worlds' one-graph cast (measured: discovery at 1,000 envs x 15 rays 1.6 -> 1.2 ms
-#: per step with it, flocking at 10,000 envs x 12 rays 7.0 -> 7.5 ms: one lidar's temporaries stay in cache)
+#: the same for compiled worlds' one-graph cast (measured: faster below; above, one lidar's
+#: temporaries stay in cache where all lidars' together do not)
 COMPILED_BATCH_BELOW_ELEMENTS = 32768
 
 
@@ -147,9 +147,9 @@ class AgentLidars:
     changes (a step, a reset, a ``set_pos``), so a reading is never stale.
     Large batches measure one lidar at a time instead: there the cost is
     memory traffic, not calls, and one lidar's ``[targets, envs, rays]``
-    temporaries stay in cache where all lidars' together do not (flocking at
-    10,000 envs: 14 ms one by one, 15-19 ms batched). Lidars that cannot be
-    batched (see :class:`BatchedLidars`) also fall back to ``measure()``. Each sensor's ``last_measurement`` is updated as
+    temporaries stay in cache where all lidars' together do not. Lidars that
+    cannot be batched (see :class:`BatchedLidars`) also fall back to
+    ``measure()``. Each sensor's ``last_measurement`` is updated as
     ``measure()`` would, so rendering shows the rays.
     """
 
@@ -188,10 +188,10 @@ class CompiledCast:
     """Several lidars cast by one compiled :func:`lidar_kernel` call (worlds that compile their physics).
 
     One compiled call instead of one per lidar, each with a dozen calls of
-    Python around its compiled kernel (discovery at 1,000 envs: 5 casts,
-    ~100 us each, against ~30 us for all five in one graph). Entity filters
-    may depend on the state, and entities may be added, so the layout is
-    checked on every cast and a change plans (and compiles) again; lidars
+    Python around its compiled kernel: at a few envs those calls, not the
+    kernels, are the cost. Entity filters may depend on the state, and
+    entities may be added, so the layout is checked on every cast and a change
+    plans (and compiles) again; lidars
     whose filters are all layout-static keep their plan while the world keeps
     its tables (see :func:`layout_static`).
     """
@@ -230,7 +230,7 @@ def lidar_layout(world, sensors: Sequence) -> tuple:
 
 
 def same_lidar_layout(known: Optional[tuple], world, sensors: Sequence) -> bool:
-    """Whether ``known`` (a :func:`lidar_layout`) still holds: one identity test, not ~25 us of target
+    """Whether ``known`` (a :func:`lidar_layout`) still holds: one identity test, not a target
     search per cast."""
     return known is not None and known[0] is world.tables and known[1] == [(s, s.entity_filter) for s in sensors]
 

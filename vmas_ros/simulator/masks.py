@@ -1,9 +1,9 @@
 """Float 0/1 masks and exact selection, the engine's alternative to bool tensors and ``torch.where``.
 
 On the CPU build we ship against, comparisons that produce bool tensors and
-``torch.where`` run an order of magnitude slower than arithmetic, so the
-physics and the ray casts compare into a float ``out=`` tensor and apply the
-mask by multiplication. For finite operands ``a * 1 = a`` and ``a * 0 + b = b``
+``torch.where`` run far slower than arithmetic, so the physics and the ray
+casts compare into a float ``out=`` tensor and apply the mask by
+multiplication. For finite operands ``a * 1 = a`` and ``a * 0 + b = b``
 exactly, so the results are bit-identical to the bool versions.
 """
 from __future__ import annotations

@@ -76,7 +76,7 @@ def ray_sphere_xy(
     * the squared half chord ``r^2 - across^2`` is ``along^2 - (|c|^2 - r^2)``,
       whose second term is per target and env;
     * hit (``half chord^2 > 0`` and ``along > 0``) is one float mask
-      (``torch.where`` is an order of magnitude slower than arithmetic on the CPU).
+      (``torch.where`` is far slower than arithmetic on the CPU).
 
     A miss returns exactly ``max_range``; a hit may differ from the textbook
     formula in the last bits. The root's argument is clamped to a tiny

@@ -19,7 +19,7 @@ class CollidesWith:
     Its answers depend only on the entities' collision properties, which the
     world's tables also depend on, so it says ``layout_static``: the world
     works out its targets once per tables instead of calling it for every
-    entity on every cast (a 4-agent sim_node: ~60 filter calls per step).
+    entity on every cast (in sim_node, dozens of filter calls per step).
     """
 
     layout_static = True

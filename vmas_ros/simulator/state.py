@@ -152,9 +152,8 @@ class EntityState(_Batched):
         """Let go of fields set before the store's last step: the step consumed them (they are stale).
 
         The getter does the same lazily, but a field nobody reads after the
-        step would keep its old tensor alive until the next setter (at 30,000
-        envs, a reset's positions for three agents hold 2 MB through every
-        later step).
+        step would keep its old tensor alive until the next setter (a reset's
+        positions would be held through every later step).
         """
         gen = self._store.gen
         for name in STORED_FIELDS:

@@ -1,16 +1,15 @@
 """The world's copy of every entity's state, handed out to entities lazily.
 
-Why: a step computes the new state of all entities at once, as two planar
+A step computes the new state of all entities at once, as two planar
 ``[3, n_entities, batch]`` tensors ``q`` (x, y, angle) and ``v`` (vx, vy,
-angular velocity). Giving every entity its own ``[batch, 2]`` tensors after
-each step (VMAS's ``entity.state.pos``) used to cost four stacks, four
-``unbind`` calls and a few dozen attribute writes, and checking before the
-next step that no entity had changed cost as much again: about half of a
-one-env step. Instead, :class:`StateStore` keeps the step's output and a
-generation number. An entity's field whose generation is older than the
-store's is read from the store the first time it is asked for (a view of a
-stack built once per generation and field), so a step does no per-entity
-work at all, and fields nobody reads are never built.
+angular velocity). :class:`StateStore` keeps them with a generation number.
+An entity's field whose generation is older than the store's is read from
+the store the first time it is asked for (a view of a stack built once per
+generation and field). Why: handing every entity its own ``[batch, 2]``
+tensors after each step (VMAS's ``entity.state.pos``), and checking before
+the next step that none changed, is per-entity work that makes up a large
+share of a step at a few envs; this way a step does none, and fields nobody
+reads are never built.
 
 What stays VMAS's semantics:
 
@@ -80,7 +79,7 @@ class StateStore:
         A reset is usually followed by the scenario setting positions, so the
         next step rebuilds its state from the entities anyway; until then a
         zero state nobody reads would be two ``[3, N, B]`` tensors held for
-        nothing (4 MB at 30,000 envs, right at the first step's peak).
+        nothing, right at the first step's peak memory.
         Rebuilding knows which fields are still zero (:attr:`zeroed`).
         """
         self.gen += 1
@@ -120,7 +119,7 @@ class StateStore:
 
     def drop_views(self) -> None:
         """Forget the stacks and views built from ``q``/``v`` (only while clean, just before a step adopts
-        a new state): nobody reads them in between, and at the step's peak memory they are a third of it."""
+        a new state): nobody reads them in between, and they would add to the step's peak."""
         self._stacks = {}
         self._pos = self._vel = None
 

@@ -358,7 +358,7 @@ class World(RayQueries, ActionInputs, StateAccess):
 
         Without a gradient to keep, each field is stacked straight into its
         rows of the new state (:func:`_stacked_planar`; the old stack and split
-        also left 8 MB of freed blocks scattered through the heap after every
+        also left freed blocks scattered through the heap after every
         reset). After a reset (a zeroed store) only what was set since is read:
         the rest is zero.
         """

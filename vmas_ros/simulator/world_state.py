@@ -58,9 +58,9 @@ class StateAccess:
 
         For scenario code that works per coordinate: ``sqrt(dx * dx + dy * dy)``
         over contiguous rows vectorises, a norm over a trailing dim of 2 does
-        not (about 10x slower at 30,000 envs). Right after a step these are
-        rows of the physics state itself (no copy); otherwise they are split
-        from :meth:`stacked_state`. Read-only, like :meth:`stacked_state`.
+        not. Right after a step these are rows of the physics state itself (no
+        copy); otherwise they are split from :meth:`stacked_state`. Read-only,
+        like :meth:`stacked_state`.
         """
         if field not in ("pos", "vel"):
             raise ValueError(f"stacked_xy: field must be 'pos' or 'vel', got {field!r}")

@@ -166,10 +166,9 @@ class Scenario(BaseScenario):
         """Agent ``index``'s observation ``[B, obs]`` at many envs, from the planar state.
 
         One tensor per agent, as the env hands them out: at 30,000 envs one
-        ``[A, B, obs]`` block (4.8 MB) made the heap's high-water mark jump by
-        its size from run to run (peak RSS 41-51 MB above the start, 40-43 MB
-        with one block per agent). Laid out ``[B, (own pos, own vel,
-        landmarks, other agents)]`` as complex numbers, i.e. (x, y) pairs: each
+        ``[A, B, obs]`` block made the heap's high-water mark jump by its size
+        from run to run, and one block per agent did not. Laid out ``[B, (own
+        pos, own vel, landmarks, other agents)]`` as complex numbers, i.e. (x, y) pairs: each
         slot is written, or a relative position subtracted into it, as whole
         8-byte pairs (a strided write of single floats takes twice the passes).
         The positions as pairs are built once per state for all agents
