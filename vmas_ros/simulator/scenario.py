@@ -7,7 +7,7 @@ works on all envs at once: tensors have the batch dimension first.
 from __future__ import annotations
 
 import abc
-from typing import List, Optional
+from typing import Any, Callable, List, Optional
 
 import torch
 from torch import Tensor
@@ -54,7 +54,7 @@ class BaseScenario(abc.ABC):
     # -- called by the environment; do not override --------------------------
     def env_make_world(self, batch_dim: int, device, **kwargs):
         self._world = self.make_world(batch_dim, device, **kwargs)
-        if type(self).batched_outputs is not BaseScenario.batched_outputs:
+        if self.batched_outputs is not None:
             from vmas_ros.simulator.compiling import StateFunction
 
             self._outputs = StateFunction(self._world, self.batched_outputs)
@@ -86,18 +86,14 @@ class BaseScenario(abc.ABC):
         """Reset env ``env_index``, or every env when it is None."""
 
     # -- optional: state-wide outputs ------------------------------------------
-    def batched_outputs(self, q: Tensor, v: Tensor):
-        """Optional: everything the rewards, observations and dones read, computed from the state at once.
-
-        ``q``, ``v``: every entity's (x, y, angle) and (vx, vy, angular
-        velocity), each ``[3, n_entities, B]`` in ``world.entities``
-        order (landmarks, then agents, each as added; see ``World.planar_state``). Return
-        any tensors (a tuple, a dict). Must be a pure function of its
-        arguments and of settings fixed at ``make_world``: the engine decides
-        when it runs and may compile it with the physics. Read the result in
-        ``reward``/``observation``/``done`` with :meth:`outputs`.
-        """
-        raise NotImplementedError
+    #: Optional: define as a method ``batched_outputs(self, q, v)`` computing, from the state at once,
+    #: everything the rewards, observations and dones read. ``q``, ``v``: every entity's (x, y, angle)
+    #: and (vx, vy, angular velocity), each ``[3, n_entities, B]`` in ``world.entities`` order
+    #: (landmarks, then agents, each as added; see ``World.planar_state``). Return any tensors (a
+    #: tuple, a dict). It must be a pure function of its arguments and of settings fixed at
+    #: ``make_world``: the engine decides when it runs and may compile it with the physics. Read the
+    #: result in ``reward``/``observation``/``done`` with :meth:`outputs`. None: not used.
+    batched_outputs: Optional[Callable[[Tensor, Tensor], Any]] = None
 
     def outputs(self):
         """The value of :meth:`batched_outputs` for the world's current state, computed at most once per state
