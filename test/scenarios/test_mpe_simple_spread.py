@@ -25,10 +25,13 @@ def test_many_envs_path_equals_few_envs_path(n_agents, obs_agents, device, monke
         agent.set_pos(((torch.rand(BATCH, 2, generator=gen) - 0.5) * 0.6).to(device), batch_index=None)
     env.step([torch.rand(BATCH, 2, generator=gen).to(device) * 2 - 1 for _ in env.agents])
     scenario = env.scenario
-    many_rew = scenario._reward_many_envs()
+    assert not scenario._few_envs
+    many_rew = scenario.reward(env.agents[0])
     many_obs = torch.stack([scenario.observation(agent) for agent in env.agents])
-    monkeypatch.setattr(simple_spread, "FEW_ENVS", 10 ** 9)
-    few_rew, few_obs = scenario._reward_few_envs(), scenario._observations()
+    monkeypatch.setattr(scenario, "_few_envs", True)
+    scenario.env_observations_handed_out()  # the same state, computed afresh by the other formulation
+    few_rew = scenario.reward(env.agents[0])
+    few_obs = torch.stack([scenario.observation(agent) for agent in env.agents])
     assert torch.equal(many_obs, few_obs)
     torch.testing.assert_close(many_rew, few_rew, atol=1e-5, rtol=0)
     if n_agents == 1:

@@ -23,9 +23,9 @@ from __future__ import annotations
 import torch
 
 from vmas_ros.scenarios.common import greedy_first_match, read_kwargs
-from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.layout import as_pairs, join_xy
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import Color
 
@@ -40,7 +40,7 @@ FEW_ENVS = 64
 
 class Scenario(BaseScenario):
     supports_batched_reset = True
-    fresh_observations = True  # computed afresh per collection (few envs: views of one result), never written to
+    fresh_observations = True  # views of one result computed per collection, never written to
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         config = read_kwargs(kwargs, DEFAULTS)
@@ -52,7 +52,6 @@ class Scenario(BaseScenario):
             world.add_agent(Agent(name=f"agent_{i}", collide=True, shape=Sphere(radius=AGENT_RADIUS), color=Color.BLUE))
         for i in range(n_agents):
             world.add_landmark(Landmark(name=f"landmark {i}", collide=False, color=Color.BLACK))
-        self._reward_cache = None
         n_landmarks = self._n_landmarks = n_agents
         #: per observing agent, the rows of world.stacked_state() it sees relative to itself:
         #: every landmark, then (with obs_agents) every other agent; entities are landmarks then agents
@@ -60,27 +59,31 @@ class Scenario(BaseScenario):
             list(range(n_landmarks)) + ([n_landmarks + j for j in range(n_agents) if j != i] if self.obs_agents else [])
             for i in range(n_agents)
         ]
-        #: the same rows in the flattened [A * N] (agent, entity) offsets of _relative_few_envs
+        #: the same rows in the flattened [A * N] (agent, entity) offsets of _few_envs_outputs
         self._seen_flat_rows = [i * (n_landmarks + n_agents) + row for i, rows in enumerate(self._seen_rows) for row in rows]
         self._seen_rows_on: dict = {}  # (which rows, device) -> [A, R] index tensor
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
-        self._few_cache = None  # (pos stack, vel stack, (rewards, observations)) of the last state, few envs only
-        self._pairs_cache = None  # (q, v, positions, velocities) as complex pairs, many envs (see _state_pairs)
         self._overlap = None  # see _overlap_thresholds
-        self._few_kernel = WorldKernel(world, self._few_envs_kernel)  # compiled with the world's physics
-        # at a few envs every step computes them with its physics (one compiled call for both when compiled)
-        self._few_handle = world.add_state_kernel(self._few_envs_kernel) if batch_dim < FEW_ENVS else None
-        # fill the index and threshold caches now: filled inside a compiled trace they would split its graph
+        self._few_envs = batch_dim < FEW_ENVS
+        # fill the index and threshold caches now: filled while the step is traced they would split its graph
         self._overlap_thresholds(world.device, world.agents)
         self._seen_rows_on[("relative", world.device)] = torch.tensor(self._seen_flat_rows, device=world.device)
         return world
 
-    def _few_envs_kernel(self, q: torch.Tensor, v: torch.Tensor) -> tuple:
-        """:func:`_few_envs_outputs` with this world's constants (a state kernel: a pure function of q, v)."""
-        seen = self._seen_rows_on.get(("relative", q.device))
-        if seen is None:
-            seen = self._seen_rows_on[("relative", q.device)] = torch.tensor(self._seen_flat_rows, device=q.device)
-        return _few_envs_outputs(q, v, self._n_landmarks, self._overlap_thresholds(q.device)[0], seen)
+    def batched_outputs(self, q: torch.Tensor, v: torch.Tensor) -> tuple:
+        """The shared reward ``[B]``, then what the observations are read from.
+
+        A few envs: every agent's observation ``[A, B, obs]`` (one pass for
+        all, see :func:`_few_envs_outputs`). Many envs: every entity's position
+        ``[N, B, 2]`` and every agent's velocity ``[A, B, 2]``, from which each
+        agent's observation is assembled on its own (:meth:`_agent_observation`).
+        """
+        if self._few_envs:
+            seen = self._seen_rows_on.get(("relative", q.device))
+            if seen is None:
+                seen = self._seen_rows_on[("relative", q.device)] = torch.tensor(self._seen_flat_rows, device=q.device)
+            return _few_envs_outputs(q, v, self._n_landmarks, self._overlap_thresholds(q.device)[0], seen)
+        return _many_envs_outputs(q, v, self._n_landmarks, self._overlap_thresholds(q.device)[1])
 
     def reset_world_at(self, env_index=None) -> None:
         world = self.world
@@ -90,9 +93,7 @@ class Scenario(BaseScenario):
             entity.set_pos(pos if env_index is None else pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
     def reward(self, agent: Agent) -> torch.Tensor:
-        if agent is self.world.agents[0]:
-            self._reward_cache = self._reward_few_envs() if self.world.batch_dim < FEW_ENVS else self._reward_many_envs()
-        return self._reward_cache
+        return self.outputs()[0]
 
     def _overlap_thresholds(self, device, agents=None) -> tuple:
         """``[A, A, 1]`` distances (and their squares) below which two agents overlap; -1 where a pair cannot count."""
@@ -106,75 +107,26 @@ class Scenario(BaseScenario):
             self._overlap = tuple((t * counts + (counts - 1)).unsqueeze(-1) for t in (reach, reach * reach))
         return self._overlap
 
-    def _reward_many_envs(self) -> torch.Tensor:
-        # planar components: squared distances over contiguous [rows, B] blocks vectorise
-        x, y = self.world.stacked_xy("pos")
-        n_landmarks = len(self.world.landmarks)
-        n_agents = x.shape[0] - n_landmarks
-        ax, ay, lx, ly = x[n_landmarks:], y[n_landmarks:], x[:n_landmarks], y[:n_landmarks]
-        # each landmark's distance to its nearest agent, summed over landmarks: [A, L, B] -> [B]
-        # (sqrt is monotonic, so the nearest agent is found on squared distances; the floor keeps
-        # the root's gradient finite when an agent sits exactly on a landmark)
-        coverage = _squared_gaps(ax, ay, lx, ly).amin(dim=0).clamp_min(1e-30).sqrt().sum(dim=0)
-        overlaps = (_squared_gaps(ax, ay, ax, ay) < self._overlap_thresholds(x.device)[1]).sum(dim=(0, 1))
-        return -n_agents * coverage - overlaps.float()
-
-    def _few_envs(self) -> tuple:
-        """``(rewards [B], observations [A, B, obs])`` in one pass over the state, once per state (few envs).
-
-        At a few envs each tensor call's fixed cost is the cost: both are read
-        from one ``[A, N, B, 2]`` table of offsets, and the whole computation is
-        one :class:`~vmas_ros.simulator.compiling.WorldKernel` (one compiled
-        call when the world compiles its physics). Keyed on the identity of the
-        world's stacked positions and velocities, like :meth:`_observations`.
-        """
-        world = self.world
-        q, v = world.planar_state()
-        cached = self._few_cache
-        if cached is not None and cached[0] is q and cached[1] is v:
-            return cached[2]
-        outputs = None if self._few_handle is None else world.take_state_kernel_output(self._few_handle)
-        if outputs is None:  # the state changed since the step (a reset, a setter), or many envs
-            outputs = self._few_kernel(q, v)
-        self._few_cache = (q, v, outputs)
-        return outputs
-
-    def _reward_few_envs(self) -> torch.Tensor:
-        return self._few_envs()[0]
-
     def observation(self, agent: Agent) -> torch.Tensor:
         index = self._agent_index[agent.name]
-        last = index == len(self._agent_index) - 1
-        if self.world.batch_dim >= FEW_ENVS:
-            observation = self._agent_observation(index)
-            if last:
-                self._pairs_cache = None
-            return observation
-        observation = self._observations()[index]
-        if last:
-            # the environment asks in agent order: the next collection computes afresh, so
-            # observations handed out (without a copy, see fresh_observations) never alias later ones
-            self._few_cache = None
-        return observation
-
-    def _observations(self) -> torch.Tensor:
-        """Every agent's observation ``[A, B, obs]`` at a few envs: computed with the rewards, once per
-        state (see :meth:`_few_envs`)."""
-        return self._few_envs()[1]
+        if self._few_envs:
+            return self.outputs()[1][index]
+        return self._agent_observation(index)
 
     def _agent_observation(self, index: int) -> torch.Tensor:
-        """Agent ``index``'s observation ``[B, obs]`` at many envs, from the planar state.
+        """Agent ``index``'s observation ``[B, obs]`` at many envs.
 
-        One tensor per agent, as the env hands them out: at 30,000 envs one
-        ``[A, B, obs]`` block made the heap's high-water mark jump by its size
-        from run to run, and one block per agent did not. Laid out ``[B, (own
-        pos, own vel, landmarks, other agents)]`` as complex numbers, i.e. (x, y) pairs: each
-        slot is written, or a relative position subtracted into it, as whole
-        8-byte pairs (a strided write of single floats takes twice the passes).
-        The positions as pairs are built once per state for all agents
-        (:meth:`_state_pairs`); the only other temporary is the other agents' gathered rows.
+        One tensor per agent, as the env hands them out: one ``[A, B, obs]``
+        block for all agents raised the heap's high-water mark by its size at
+        many envs, and one block per agent did not. Laid out ``[B, (own pos,
+        own vel, landmarks, other agents)]`` as complex numbers, i.e. (x, y)
+        pairs: each slot is written, or a relative position subtracted into it,
+        as whole 8-byte pairs (a strided write of single floats takes twice the
+        passes). The pairs come from :meth:`batched_outputs`, once per state
+        for all agents; the only other temporary is the other agents' gathered rows.
         """
-        positions, velocities = self._state_pairs()
+        _, positions, velocities = self.outputs()
+        positions, velocities = as_pairs(positions), as_pairs(velocities)
         n_landmarks = self._n_landmarks
         own = positions[n_landmarks + index]
         observation = torch.empty(own.shape[0], len(self._seen_rows[index]) + 2, dtype=positions.dtype,
@@ -188,17 +140,6 @@ class Scenario(BaseScenario):
             _subtract_into(observation[:, 2 + n_landmarks:], positions.index_select(0, others).t(), own)
         return torch.view_as_real(observation).flatten(1)
 
-    def _state_pairs(self) -> tuple:
-        """Every entity's position ``[N, B]`` and every agent's velocity ``[A, B]`` as complex (x, y) pairs,
-        once per state (keyed on the planar state's identity; dropped after the last agent's observation)."""
-        q, v = self.world.planar_state()
-        cached = self._pairs_cache
-        if cached is None or cached[0] is not q or cached[1] is not v:
-            n_landmarks = self._n_landmarks
-            cached = self._pairs_cache = (q, v, torch.complex(q[0], q[1]),
-                                          torch.complex(v[0, n_landmarks:], v[1, n_landmarks:]))
-        return cached[2], cached[3]
-
     def _other_agents_index(self, index: int, device):
         """The state rows of the agents agent ``index`` observes (None without ``obs_agents``), cached."""
         key = ("others", index, device)
@@ -208,6 +149,24 @@ class Scenario(BaseScenario):
         return self._seen_rows_on[key]
 
 
+def _many_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below_squared: torch.Tensor) -> tuple:
+    """Rewards ``[B]``, positions ``[N, B, 2]`` and agents' velocities ``[A, B, 2]`` from the planar state.
+
+    On planar rows ``[N, B]``: squared distances over contiguous blocks
+    vectorise. The nearest agent to each landmark is found on squared
+    distances (sqrt is monotonic); the floor before the root keeps its
+    gradient finite when an agent sits exactly on a landmark.
+    """
+    x, y = q[0], q[1]
+    n_agents = x.shape[0] - n_landmarks
+    ax, ay, lx, ly = x[n_landmarks:], y[n_landmarks:], x[:n_landmarks], y[:n_landmarks]
+    coverage = _squared_gaps(ax, ay, lx, ly).amin(dim=0).clamp_min(1e-30).sqrt().sum(dim=0)  # [A, L, B] -> [B]
+    overlaps = (_squared_gaps(ax, ay, ax, ay) < overlap_below_squared).sum(dim=(0, 1))
+    rewards = -n_agents * coverage - overlaps.float()
+    positions, velocities = join_xy(x, y), join_xy(v[0, n_landmarks:], v[1, n_landmarks:])
+    return rewards, positions, velocities
+
+
 def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below: torch.Tensor,
                       seen: torch.Tensor) -> tuple:
     """Rewards ``[B]`` and observations ``[A, B, obs]`` from the planar state ``[3, N, B]`` (landmarks first).
@@ -215,7 +174,7 @@ def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overla
     ``overlap_below`` ``[A, A, 1]``: distance under which two agents overlap
     (negative for pairs that cannot); ``seen``: each agent's observed rows of
     the flattened ``[A * N]`` offsets. A pure function of tensors (see
-    ``WorldKernel``): the same numbers as the many-envs formulation.
+    ``Scenario.batched_outputs``): the same numbers as :func:`_many_envs_outputs`.
     """
     xy = q[:2].permute(1, 2, 0).contiguous()  # [N, B, 2]: contiguous pairs (strided ones slow every op below)
     agents = xy[n_landmarks:]
