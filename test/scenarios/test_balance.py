@@ -15,6 +15,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import balance
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
@@ -38,10 +39,6 @@ def entities(env) -> dict:
 
 def shaping_of(env) -> dict:
     return {"shaping": env.scenario.shaping}
-
-
-def copy_shaping(up, ours) -> None:
-    ours.scenario.shaping = up.scenario.global_shaping.clone()
 
 
 def line_frame(env, names) -> tuple:
@@ -156,7 +153,7 @@ def lockstep(up, ours, **kwargs):
 def test_matches_upstream_vmas_random_actions(kwargs):
     """Random pushes soon drop the line: falls, fall rewards and dones are compared."""
     up, ours = harness.make_upstream(NAME, BATCH, **kwargs), make(**kwargs)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.balance)
     seen = lockstep(up, ours)
     assert seen.largest_reward >= 10 and ours.done().any()
 
@@ -165,7 +162,7 @@ def test_matches_upstream_vmas_while_carrying():
     """Lock-step under the heuristic (plus noise): lifting against gravity, the line tilting and
     the package riding on it."""
     up, ours = harness.make_upstream(NAME, BATCH), make()
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.balance)
     policy = balance.HeuristicPolicy()
     start = entities(ours)["package"].state.pos.clone()
 

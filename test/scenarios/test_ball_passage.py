@@ -10,7 +10,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import ball_passage
 
 NAME = "ball_passage"
@@ -20,12 +20,6 @@ CUSTOM = {"n_passages": 3, "fixed_passage": True, "random_start_angle": False}
 
 def make(num_envs: int = 4, **kwargs):
     return harness.make(ball_passage.Scenario(), num_envs, **kwargs)
-
-
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps the ball's last distances to the nearest gap and to the goal; the next reward needs them."""
-    ours.scenario.pre_shaping = up.scenario.ball.pos_shaping_pre.clone()
-    ours.scenario.post_shaping = up.scenario.ball.pos_shaping_post.clone()
 
 
 # ------------------------------------------------------------------- construction
@@ -80,7 +74,7 @@ def upward_actions(batch: int):
 @pytest.mark.parametrize("kwargs", [{}, CUSTOM], ids=["default", "custom"])
 def test_matches_upstream_vmas(kwargs):
     up, ours = harness.make_upstream(NAME, 6, **kwargs), make(6, **kwargs)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.ball_passage)
     draw, gen = upward_actions(6), torch.Generator().manual_seed(0)
     parity.assert_same_state(up, ours, 0)
     charged, progress = 0.0, 0.0

@@ -15,7 +15,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import ball_trajectory
 
 NAME = "ball_trajectory"
@@ -33,11 +33,6 @@ def copy_world(up, ours) -> None:
         if e_ours.name.startswith("joint"):
             for field in parity.FIELDS:
                 getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
-
-
-def copy_shaping(up, ours) -> None:
-    s = up.scenario
-    ours.scenario.shaping = {"pos": s.pos_shaping.clone(), "speed": s.speed_shaping.clone(), "dist": s.dist_shaping.clone()}
 
 
 # ------------------------------------------------------------------- construction
@@ -77,7 +72,7 @@ def test_spaces_match_upstream(mode):
 def compare(joints: bool, kwargs: dict, steps: int) -> parity.Lockstep:
     up, ours = harness.make_upstream(NAME, 4, **kwargs), make(4, **kwargs)
     copy_world(up, ours)
-    copy_shaping(up, ours)
+    vmas_states.ball_trajectory(up, ours)
     gen, seen = torch.Generator().manual_seed(0), parity.Lockstep()
     parity.assert_same_state(up, ours, 0)
     for step in range(1, steps + 1):

@@ -16,7 +16,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import football
 from vmas_ros.scenarios.football_ai import HeuristicPolicy
 from vmas_ros.simulator.utils import LINE_MIN_DIST
@@ -169,7 +169,7 @@ def compare_infos(up, ours) -> None:
 
 def test_matches_upstream_from_its_reset():
     up, ours = harness.make_upstream(NAME, 8, **AI_OFF), make(8, **AI_OFF)
-    harness.copy_start(up, ours, lambda u, o: o.scenario.reset_shaping())
+    harness.copy_start(up, ours, vmas_states.football)
     seen = parity.run_lockstep(up, ours, seed=0, steps=30)
     assert seen.largest_reward > 0
     compare_infos(up, ours)

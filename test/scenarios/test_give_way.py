@@ -12,6 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import give_way
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
@@ -125,14 +126,9 @@ def test_reset_at_resets_exactly_those_envs(index):
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps each agent's last distance to goal (x pos_shaping_factor); the next reward needs it."""
-    ours.scenario.shaping = torch.stack([a.shaping for a in up.world.agents], dim=1).clone()
-
-
 def test_matches_upstream_vmas():
     up, ours = harness.make_upstream(NAME, 8), make(8)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.give_way)
     seen = run_lockstep(up, ours, seed=0, steps=40)
     assert seen.fastest > 0.1  # the velocity controller did drive them
 
@@ -156,7 +152,7 @@ def test_matches_upstream_vmas_in_contact(options, steps):
             a_up.set_pos(pos, batch_index=None)
             a_ours.set_pos(pos, batch_index=None)
             a_up.shaping = torch.linalg.vector_norm(pos - a_up.goal.state.pos, dim=-1)
-        copy_shaping(up, ours)
+        vmas_states.give_way(up, ours)
 
     harness.copy_start(up, ours, crowd)
     seen = run_lockstep(up, ours, seed=1, steps=steps)

@@ -22,18 +22,13 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import joint_passage as jp
 from vmas_ros.scenarios import joint_passage_common as common
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
 NAME = "joint_passage"
 R = common.AGENT_RADIUS
-#: our shaping names -> VMAS's attributes of ``scenario.joint``
-SHAPING_NAMES = {
-    "pos_pre": "pos_shaping_pre", "pos_post": "pos_shaping_post",
-    "rot_pre": "rot_shaping_pre", "rot_post": "rot_shaping_post",
-}
 
 
 def make(num_envs: int = 4, **kwargs):
@@ -41,16 +36,6 @@ def make(num_envs: int = 4, **kwargs):
 
 
 # --------------------------------------------------------- shared helpers
-def copy_scenario_state(up, ours, layout=()) -> None:
-    """Upstream's per-env scenario state into ours: the shaping potentials, ``passed`` and the
-    attributes named in ``layout`` (same name on both sides)."""
-    for name in ours.scenario.shaping:
-        ours.scenario.shaping[name] = getattr(up.scenario.joint, SHAPING_NAMES[name]).clone()
-    ours.scenario.passed = up.scenario.passed.clone()
-    for name in layout:
-        setattr(ours.scenario, name, getattr(up.scenario, name).clone())
-
-
 def scenario_state(env) -> dict:
     state = {f"shaping.{k}": v for k, v in env.scenario.shaping.items()}
     return {**state, "passed": env.scenario.passed}
@@ -173,7 +158,7 @@ def test_spaces_match_upstream(mode):
 # ------------------------------------------------------------------ parity
 def test_matches_upstream_random_actions():
     up, ours = harness.make_upstream(NAME, 4), make(4)
-    harness.copy_start(up, ours, copy_scenario_state)
+    harness.copy_start(up, ours, vmas_states.joint_passage)
     seen = parity.run_lockstep(up, ours, seed=0, steps=40)
     assert seen.largest_reward > 0.005 and seen.fastest > 0.05
 
@@ -185,7 +170,7 @@ def test_matches_upstream_through_the_gap():
     and energy terms) all compared, ``info`` and ``done`` included."""
     kwargs = dict(asym_package=False, use_controller=True, collision_reward=-1.0, energy_reward_coeff=0.5)
     up, ours = harness.make_upstream(NAME, 4, **kwargs), make(4, **kwargs)
-    harness.copy_start(up, ours, copy_scenario_state)
+    harness.copy_start(up, ours, vmas_states.joint_passage)
     gap_x = float(ours.scenario.gap_blocks[0].state.pos[0, 0])
     x = gap_x + torch.tensor([0.0, 0.037, -0.038, 0.02])
     place_upright([up, ours], x, upper_y=0.56, length=0.5, agent_1_up=torch.tensor([True, False, True, False]))

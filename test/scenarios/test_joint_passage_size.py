@@ -18,9 +18,9 @@ import torch
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
 from test.scenarios.test_joint_passage import (
-    compare_steps, copy_scenario_state, heuristic_actions, place_upright, reset_at_check, scenario_state,
+    compare_steps, heuristic_actions, place_upright, reset_at_check, scenario_state,
 )
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import joint_passage_common as common
 from vmas_ros.scenarios import joint_passage_size as jps
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
@@ -31,10 +31,6 @@ LAYOUT = ("big_passage_pos", "small_passage_pos", "pass_center", "middle_angle")
 
 def make(num_envs: int = 4, **kwargs):
     return harness.make(jps.Scenario(), num_envs, **kwargs)
-
-
-def copy_state(up, ours) -> None:
-    copy_scenario_state(up, ours, LAYOUT)
 
 
 def size_state(env) -> dict:
@@ -87,7 +83,7 @@ def test_spaces_match_upstream(mode):
 )
 def test_matches_upstream_random_actions(kwargs):
     up, ours = harness.make_upstream(NAME, 4, **kwargs), make(4, **kwargs)
-    harness.copy_start(up, ours, copy_state)
+    harness.copy_start(up, ours, vmas_states.joint_passage_size)
     seen = parity.run_lockstep(up, ours, seed=0, steps=50)
     assert seen.largest_reward > 0.01 and seen.fastest > 0.1
 
@@ -99,7 +95,7 @@ def test_matches_upstream_through_the_big_gap():
     far from the walls (where the two count alike)."""
     kwargs = dict(fixed_passage=True, use_vel_controller=True, collision_reward=-1.0, energy_reward_coeff=0.5)
     up, ours = harness.make_upstream(NAME, 4, **kwargs), make(4, **kwargs)
-    harness.copy_start(up, ours, copy_state)
+    harness.copy_start(up, ours, vmas_states.joint_passage_size)
     gap_x = float(ours.scenario.big_passage_pos[0, 0])
     x = gap_x + torch.tensor([0.0, 0.0435, -0.03, 0.044])
     place_upright([up, ours], x, upper_y=0.6, length=0.52, agent_1_up=torch.tensor([True, False, True, False]))
@@ -116,7 +112,7 @@ def test_pos_shaping_factor_applies_once():
     runs = {}
     for factor in (1.0, 3.0):
         up, ours = harness.make_upstream(NAME, 4, pos_shaping_factor=factor), make(4, pos_shaping_factor=factor)
-        harness.copy_start(up, ours, copy_state)
+        harness.copy_start(up, ours, vmas_states.joint_passage_size)
         gen = torch.Generator().manual_seed(0)
         runs[factor] = []
         for _ in range(4):

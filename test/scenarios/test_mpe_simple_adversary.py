@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_adversary as scenario
 
@@ -85,16 +86,10 @@ def test_long_rollouts_stay_finite(policy):
 
 
 # ------------------------------------------------------------------------ parity
-def _copy_goal(up, ours) -> None:
-    # upstream keeps one goal Landmark for the whole batch on every agent (agent.goal);
-    # ours keeps a landmark index per env, so every env gets upstream's goal
-    ours.scenario.goal[:] = up.world.landmarks.index(up.world.agents[0].goal)
-
-
 @pytest.mark.parametrize("kwargs", KWARGS)
 def test_parity_with_upstream_vmas(kwargs):
     up, env = harness.make_upstream(NAME, BATCH, **kwargs), _make(**kwargs)
-    harness.copy_start(up, env, _copy_goal)
+    harness.copy_start(up, env, vmas_states.simple_adversary)
     # actions uniform in [-1, 1] (u_range is 1); every state field within 1e-4, absolute only
     run_lockstep(up, env, seed=7, rtol=0)
 

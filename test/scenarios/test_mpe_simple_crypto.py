@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_crypto as scenario
 
@@ -94,18 +95,12 @@ def test_long_rollouts_stay_finite(policy):
 
 
 # ------------------------------------------------------------------------ parity
-def _copy_secret_and_key(up, ours) -> None:
-    # upstream: one shared long tensor agent.secret on every agent, the key on the speaker (agents[2])
-    ours.scenario.secret[:] = up.world.agents[0].secret.float()
-    ours.scenario.key[:] = up.world.agents[2].key.float()
-
-
 @pytest.mark.parametrize("kwargs", KWARGS)
 @pytest.mark.parametrize("continuous", [True, False], ids=["continuous", "discrete"])
 def test_parity_with_upstream_vmas(kwargs, continuous):
     up = harness.make_upstream(NAME, BATCH, continuous_actions=continuous, **kwargs)
     env = _make(continuous_actions=continuous, **kwargs)
-    harness.copy_start(up, env, _copy_secret_and_key)
+    harness.copy_start(up, env, vmas_states.simple_crypto)
     dim_c = env.world.dim_c
 
     def actions(gen):

@@ -12,6 +12,7 @@ from mpe2 import simple_push_v3
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_push
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
@@ -82,15 +83,9 @@ def test_long_rollouts_stay_finite():
 
 
 # ------------------------------------------------------------------------- parity
-def copy_goal(up, ours) -> None:
-    """Besides positions, upstream randomises the goal landmark at reset (one for the
-    whole batch); the good agent's reward, observation and colour depend on it."""
-    ours.scenario.set_goal(torch.tensor(up.world.landmarks.index(up.world.agents[1].goal)))
-
-
 def test_matches_upstream_vmas():
     up, ours = harness.make_upstream(NAME, BATCH), make()
-    harness.copy_start(up, ours, copy_goal)
+    harness.copy_start(up, ours, vmas_states.simple_push)
     torch.testing.assert_close(ours.agents[1].color[0], up.world.agents[1].color)
     run_lockstep(up, ours, seed=0)
 

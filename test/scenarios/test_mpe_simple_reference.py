@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_reference as scenario
 
@@ -75,16 +76,10 @@ def test_long_rollouts_stay_finite(policy):
 
 
 # ------------------------------------------------------------------------ parity
-def _copy_goal(up, ours) -> None:
-    # upstream: agent.goal_b is one Landmark per agent for the whole batch; ours an index per env
-    for i, agent in enumerate(up.world.agents):
-        ours.scenario.goal[:, i] = up.world.landmarks.index(agent.goal_b)
-
-
 @pytest.mark.parametrize("continuous", [True, False], ids=["continuous", "discrete"])
 def test_parity_with_upstream_vmas(continuous):
     up, env = harness.make_upstream(NAME, BATCH, continuous_actions=continuous), _make(continuous_actions=continuous)
-    harness.copy_start(up, env, _copy_goal)
+    harness.copy_start(up, env, vmas_states.simple_reference)
 
     def actions(gen):
         if continuous:

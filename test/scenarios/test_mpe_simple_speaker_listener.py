@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.mpe import simple_speaker_listener
 
@@ -19,8 +20,6 @@ def make(num_envs=8, **kwargs):
 
 
 # ------------------------------------------------------------------ construction
-
-
 def test_construction_and_unknown_kwargs_warn():
     env = make()
     assert [a.name for a in env.agents] == ["speaker_0", "listener_0"]
@@ -44,8 +43,6 @@ def test_heuristic_rollout_is_finite():
 
 
 # ------------------------------------------------------------------------ resets
-
-
 def scenario_state(env):
     """The per-env scenario state a reset clears (the speaker's message) or redraws (the goal)."""
     return {"speaker.c": env.scenario.speaker.state.c, "goal": env.scenario.goal}
@@ -67,25 +64,15 @@ def test_every_env_draws_its_own_goal():
 
 
 # ------------------------------------------------------------------------ parity
-
-
-def copy_goal(up, ours):
-    # Upstream draws one goal landmark for the whole batch (agent 0's goal_b);
-    # ours keeps a goal index per env, so give every env upstream's goal.
-    ours.scenario.goal[:] = up.world.landmarks.index(up.world.agents[0].goal_b)
-
-
 @pytest.mark.parametrize("mode", [dict(), dict(continuous_actions=False)], ids=["continuous", "discrete"])
 def test_parity_with_upstream_vmas(mode):
     up, ours = harness.make_upstream(NAME, 16, **mode), make(16, **mode)
-    harness.copy_start(up, ours, copy_goal)
+    harness.copy_start(up, ours, vmas_states.simple_speaker_listener)
     seen = run_lockstep(up, ours, seed=2, actions=lambda gen: harness.space_actions(ours, gen), speakers=[0])
     assert seen.loudest_message > 0.5  # the message channel was exercised
 
 
 # --------------------------------------------------------------------- semantics
-
-
 def test_rewards_and_observations_agree_with_mpe():
     """MPE (mpe2) is the reference for what the task means.
 
@@ -111,8 +98,6 @@ def test_rewards_and_observations_agree_with_mpe():
 
 
 # --------------------------------------------------------------------- heuristic
-
-
 def mean_return(env, policy, steps=100):
     """The shared return (agent 0's), mean over envs, every agent on ``policy`` (random if None)."""
     return harness.team_returns(env, policy, lambda a: policy is not None, steps)[0]

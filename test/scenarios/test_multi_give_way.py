@@ -13,7 +13,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import multi_give_way
 
@@ -92,11 +92,6 @@ def test_observation_layout_and_noise():
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps each agent's last distance to goal (x pos_shaping_factor); the next reward needs it."""
-    ours.scenario.shaping = torch.stack([a.shaping for a in up.world.agents], dim=1).clone()
-
-
 def crowd(batch: int):
     """A copy_start hook: agents near the crossing (so they touch each other and the walls);
     in env 0 instead all of them on their goals, so ``final_rew`` is paid there."""
@@ -110,7 +105,7 @@ def crowd(batch: int):
             for a in (a_up, a_ours):
                 a.set_pos(pos.clone(), batch_index=None)
             a_up.shaping = torch.linalg.vector_norm(pos - a_up.goal.state.pos, dim=-1) * up.scenario.pos_shaping_factor
-        copy_shaping(up, ours)
+        vmas_states.multi_give_way(up, ours)
 
     return place
 
@@ -125,7 +120,7 @@ def compare_infos(up, ours, batch: int) -> None:
 
 def test_matches_upstream_vmas():
     up, ours = harness.make_upstream(NAME, 4), make(4)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.multi_give_way)
     seen = run_lockstep(up, ours, seed=0, steps=30)
     assert seen.fastest > 0.2 and seen.largest_reward > 0.02
     compare_infos(up, ours, 4)

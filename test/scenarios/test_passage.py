@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import passage
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
@@ -119,11 +119,6 @@ def test_reset_at_resets_exactly_those_envs(index):
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps each agent's last distance to goal (x 100); the next reward needs it."""
-    ours.scenario.global_shaping = torch.stack([a.global_shaping for a in up.world.agents], dim=1).clone()
-
-
 def upward_actions(batch: int):
     """Random actions biased up, towards the barrier, so agents hit it and each other."""
     def draw(gen: torch.Generator):
@@ -138,7 +133,7 @@ def upward_actions(batch: int):
 @pytest.mark.parametrize("n_passages", [1, 4])
 def test_matches_upstream_vmas(n_passages):
     up, ours = harness.make_upstream(NAME, 8, n_passages=n_passages), make(8, n_passages=n_passages)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.passage)
     seen = parity.run_lockstep(up, ours, seed=0, steps=35, actions=upward_actions(8))
     assert seen.largest_reward > 10  # collisions were charged
 
@@ -148,7 +143,7 @@ def test_shared_reward_matches_upstream_up_to_its_aliasing():
     (negative) collision terms of agents ``0..k-1``; ``info`` splits ours in its two terms."""
     batch = 8
     up, ours = harness.make_upstream(NAME, batch, shared_reward=True), make(batch, shared_reward=True)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.passage)
     draw, gen = upward_actions(batch), torch.Generator().manual_seed(0)
     charged = 0.0
     for step in range(1, 31):

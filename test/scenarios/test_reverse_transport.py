@@ -10,6 +10,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.bench.heuristics import episode_returns
 from vmas_ros.scenarios import reverse_transport
@@ -123,15 +124,9 @@ def test_agents_spawn_inside_and_apart():
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps the box's last shaped distance and on-goal flag; the first reward needs them."""
-    ours.scenario.potential = up.scenario.package.global_shaping.clone()
-    ours.scenario.on_goal = up.scenario.package.on_goal.clone()
-
-
 def test_matches_upstream_vmas_random_actions():
     up, ours = harness.make_upstream(NAME, BATCH), make()
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.reverse_transport)
     seen = run_lockstep(up, ours, seed=0, steps=40)
     assert seen.largest_reward > 0.01  # agents hit the walls and moved the box
 
@@ -143,7 +138,7 @@ def test_matches_upstream_vmas_while_delivering():
     """
     kwargs = dict(CUSTOM, package_mass=1.0)
     up, ours = harness.make_upstream(NAME, BATCH, **kwargs), make(**kwargs)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.reverse_transport)
     policy = reverse_transport.HeuristicPolicy()
     arrived = torch.zeros(BATCH, dtype=torch.bool)
 

@@ -16,7 +16,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios import road_traffic
 from vmas_ros.scenarios.road_traffic import map_data
@@ -78,19 +78,9 @@ def test_spaces_match_upstream_and_actions_work(mode):
 
 
 # ------------------------------------------------------------------------- parity
-def copy_routes(up, ours) -> None:
-    """Upstream's reset drew a route and a start point per agent; ours takes them (and the states)."""
-    paths = up.scenario.ref_paths_agent_related
-    stack = lambda field: torch.stack([getattr(a.state, field) for a in up.agents], dim=1)  # noqa: E731
-    rows = torch.arange(up.num_envs)
-    ours.scenario.set_starts(
-        rows, paths.path_id.long(), paths.point_id.long(), stack("pos"), stack("rot")[..., 0], stack("vel")
-    )
-
-
 def lockstep(options: dict, steps: int, batch: int = 2, seed: int = 0):
     up, ours = harness.make_upstream(NAME, batch, **options), make(batch, **options)
-    harness.copy_start(up, ours, copy_routes)
+    harness.copy_start(up, ours, vmas_states.road_traffic)
     obs_up = up.get_from_scenario(True, False, False, False)[0]
     obs = ours.get_from_scenario(True, False, False, False)[0]
     for mine, theirs in zip(obs, obs_up, strict=True):

@@ -10,6 +10,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import ACTION_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.bench.heuristics import episode_returns
 from vmas_ros.scenarios import transport
@@ -131,15 +132,9 @@ def test_spawn_keeps_its_gaps():
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps each package's last shaped distance and on-goal flag; the first reward needs them."""
-    ours.scenario.potential = torch.stack([p.global_shaping for p in up.scenario.packages], dim=1).clone()
-    ours.scenario.on_goal = torch.stack([p.on_goal for p in up.scenario.packages], dim=1).clone()
-
-
 def test_matches_upstream_vmas_random_actions():
     up, ours = harness.make_upstream(NAME, BATCH), make()
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.transport)
     run_lockstep(up, ours, seed=0)
 
 
@@ -152,7 +147,7 @@ def test_matches_upstream_vmas_while_delivering():
     """
     kwargs = dict(CUSTOM, package_mass=0.5)
     up, ours = harness.make_upstream(NAME, BATCH, **kwargs), make(**kwargs)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.transport)
     policy = transport.HeuristicPolicy(package_width=0.1, package_length=0.2)
     arrived = torch.zeros(BATCH, 2, dtype=torch.bool)
 

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import wind_flocking
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
@@ -88,17 +88,6 @@ def test_spaces_match_upstream_and_actions_work(mode, kwargs):
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream's per-env reward state: step count, shaping values, the big agent's wind."""
-    mine, theirs = ours.scenario, up.scenario
-    mine.t = theirs.t.clone()
-    mine.distance_shaping, mine.rot_shaping = theirs.distance_shaping.clone(), theirs.rot_shaping.clone()
-    mine.pos_shaping = theirs.pos_shaping.clone()
-    for name in ("vel_shaping", "energy_shaping", "wind_shaping"):
-        setattr(mine, name, torch.stack([getattr(a, name) for a in up.world.agents], dim=1).clone())
-    mine.big_agent.gravity = theirs.big_agent.gravity.clone()
-
-
 def lockstep(up, ours, seed: int, steps: int = 50, **kwargs) -> dict:
     """``run_lockstep``, also comparing every info and the big agent's wind between steps."""
     seen = {"sheltered": 0.0, "wind_rew": 0.0, "energy_rew": 0.0, "rot_rew": 0.0}
@@ -127,7 +116,7 @@ def lockstep(up, ours, seed: int, steps: int = 50, **kwargs) -> dict:
 
 def test_matches_upstream_vmas():
     up, ours = harness.make_upstream(NAME, 8), make(8)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.wind_flocking)
     seen = lockstep(up, ours, seed=0)
     assert seen["largest_reward"] > 0.01 and seen["sheltered"] > 0.1 and seen["wind_rew"] > 0
 
@@ -139,7 +128,7 @@ def test_matches_upstream_vmas_from_random_layouts(kwargs):
     up, ours = harness.make_upstream(NAME, 8, **kwargs), make(8, **kwargs)
     harness.copy_start(up, ours)
     parity.copy_random_state(up, ours, seed=1, spread=0.6, agents_only=True)
-    copy_shaping(up, ours)
+    vmas_states.wind_flocking(up, ours)
     seen = lockstep(up, ours, seed=1, steps=40)
     assert seen["sheltered"] > 0.5 and seen["wind_rew"] > 0 and seen["energy_rew"] > 0
     assert seen["rot_rew"] > 0 or kwargs.get("rot_shaping_factor", 0) == 0

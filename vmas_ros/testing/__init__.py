@@ -6,6 +6,9 @@ scenario (a registered name or a ``BaseScenario`` instance) and raises
 vmas_ros/testing/check_scenario.py for the list and docs/check_scenario.md for
 a walk-through. ``vmas_ros.testing.parity`` compares an env with VMAS's step
 by step; the project's own tests use the same functions.
+``vmas_ros.testing.vmas_states`` and ``vmas_ros.testing.vmas_differences``
+hold what the comparison knows about each shipped scenario's VMAS
+counterpart: how to copy its per-env draw, and where it differs on purpose.
 """
 from vmas_ros.testing.check_scenario import CHECKS, check_scenario
 from vmas_ros.testing.report import CheckReport, ScenarioCheckError

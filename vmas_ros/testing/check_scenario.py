@@ -25,7 +25,10 @@ itself and what it found against what it expected:
    actions leaves envs 1.. exactly as they were with the original ones;
 9. ``vmas_parity``: when ``vmas`` is importable and the scenario has a VMAS
    counterpart, VMAS's start copied into ours and both stepped in lock-step
-   agree on states, observations and rewards within ``atol``.
+   agree on states, observations and rewards within ``atol``. A shipped
+   scenario brings what the project knows about its counterpart: the hook
+   that copies its per-env draw (``vmas_states``), and its deliberate
+   differences and chaotic contacts (``vmas_differences``).
 
 A check that does not apply (VMAS not installed, a single env) is reported as
 skipped, with the reason, in the returned ``CheckReport``, which is also
@@ -127,7 +130,9 @@ def check_scenario(
     keeps that ours keeps under the same name and shape; a scenario that
     keeps its per-env state under other names passes
     ``scenario_state(vmas_env, our_env)``, which writes VMAS's draw into ours
-    instead. Observations, rewards and states must agree within ``atol``.
+    instead; a registered scenario gets its shipped hook
+    (``vmas_states.SCENARIO_STATES``) unless the caller passes one.
+    Observations, rewards and states must agree within ``atol``.
 
     Returns the ``CheckReport`` (passed and skipped checks, with reasons).
     """

@@ -18,6 +18,8 @@ from vmas_ros.testing.rollout import (
     SPACE_MODES, by_agent, describe_envs, named_tensors, non_finite, space_actions, space_mismatch,
 )
 from vmas_ros.testing.state import capture_kept, changed_rows, copy_kept_tensors, entity_state, per_env
+from vmas_ros.testing.vmas_differences import RESYNC, design_difference
+from vmas_ros.testing.vmas_states import SCENARIO_STATES
 
 __all__ = [
     "Subject", "check_spaces", "check_reset_observations", "check_step_outputs", "check_device", "check_finite",
@@ -339,7 +341,13 @@ def check_batching(subject: Subject) -> Optional[str]:
 
 
 def check_vmas_parity(subject: Subject) -> Optional[str]:
-    """VMAS's start copied into ours, then both stepped alike, agree within ``atol``."""
+    """VMAS's start copied into ours, then both stepped alike, agree within ``atol``.
+
+    A shipped scenario compared with its own VMAS counterpart gets what the
+    project knows about that pair: its ``vmas_states`` hook (unless the
+    caller passes one), its ``vmas_differences`` (skipped under a deliberate
+    difference, compared step by step from VMAS's state when chaotic).
+    """
     from vmas_ros.compat.install import is_installed
 
     if is_installed():
@@ -352,19 +360,27 @@ def check_vmas_parity(subject: Subject) -> Optional[str]:
     if name is None:
         raise CheckSkipped(f"{subject.label} is not a registered scenario: pass vmas_name= to compare it with VMAS's")
     available = set(vmas.scenarios) | set(vmas.debug_scenarios) | set(vmas.mpe_scenarios)
+    version = getattr(vmas, "__version__", "?")
     if name not in available:
-        _require(subject.vmas_name is None, f"vmas_name={name!r}: VMAS {vmas.__version__} has no such scenario")
-        raise CheckSkipped(f"VMAS {vmas.__version__} has no scenario named {name!r}")
+        _require(subject.vmas_name is None, f"vmas_name={name!r}: VMAS {version} has no such scenario")
+        raise CheckSkipped(f"VMAS {version} has no scenario named {name!r}")
+    shipped = subject.registered == name  # one of ours, against its own counterpart
+    difference = design_difference(name, subject.scenario_kwargs) if shipped else None
+    if difference:
+        raise CheckSkipped(f"{name} differs from VMAS {version} by design: {difference}")
     up = parity.make_vmas_env(name, subject.num_envs, subject.device, subject.seed, **subject.scenario_kwargs)
     ours = subject.make()
     parity.assert_same_space(ours.observation_space, up.observation_space, "observation space")
     parity.assert_same_space(ours.action_space, up.action_space, "action space")
     not_copied: List[str] = []
-    hook = subject.scenario_state or (lambda theirs, mine: not_copied.extend(copy_kept_tensors(theirs, mine)))
-    parity.copy_start(up, ours, hook)
+    hook = subject.scenario_state or (SCENARIO_STATES.get(name) if shipped else None)
+    shipped_hook = hook is not None and subject.scenario_state is None
+    parity.copy_start(up, ours, hook or (lambda theirs, mine: not_copied.extend(copy_kept_tensors(theirs, mine))))
+    parity.copy_random_stream(up, ours)
+    resync = RESYNC.get(name) if shipped else None
     squeezed = _squeeze_column_rewards(up)
     try:
-        parity.run_lockstep(up, ours, subject.seed, steps=subject.steps, atol=subject.atol,
+        parity.run_lockstep(up, ours, subject.seed, steps=subject.steps, atol=subject.atol, resync=resync is not None,
                             actions=lambda gen: space_actions(ours, gen))
     except AssertionError as failure:
         hint = ""
@@ -372,9 +388,11 @@ def check_vmas_parity(subject: Subject) -> Optional[str]:
             hint = (f"\n(VMAS's scenario keeps tensors that ours has none of the same name and shape for, so they were "
                     f"not copied: {', '.join(not_copied[:6])}{' ...' if len(not_copied) > 6 else ''}; if ours keeps "
                     f"that state under other names, pass scenario_state=<function (vmas_env, our_env)> to copy it)")
+        elif shipped_hook:
+            hint = f"\n(VMAS's per-env draw was copied by vmas_ros.testing.vmas_states.SCENARIO_STATES[{name!r}])"
         raise AssertionError(f"against VMAS's {name!r}: {failure}{hint}") from failure
-    version = getattr(vmas, "__version__", "?")
     notes = ["VMAS's scenario gives [B, 1] rewards; they were compared as [B]" if squeezed else None,
+             f"compared one step at a time from VMAS's state: {resync}" if resync else None,
              None if version == "1.5.2" else f"compared with VMAS {version}; vmas_ros follows 1.5.2"]
     return "; ".join(note for note in notes if note) or None
 

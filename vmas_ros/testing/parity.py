@@ -5,7 +5,8 @@ Every parity comparison does the same three things:
 1. one initial state in both worlds: ``copy_random_state`` (a random,
    contact-rich state written into both), or ``copy_start`` (ours starts where
    VMAS's own reset left it: every entity's state, plus the per-env scenario
-   state a ``scenario_state(vmas_env, our_env)`` hook writes);
+   state a ``scenario_state(vmas_env, our_env)`` hook writes; add
+   ``copy_random_stream`` where observations are noisy);
 2. both stepped with identical actions (``run_lockstep``);
 3. the same states (``assert_same_state``), observations and rewards within
    ``ATOL`` at every step (``assert_same_outputs`` adds dones and infos).
@@ -30,8 +31,8 @@ from vmas_ros.testing.state import FIELDS
 
 __all__ = [
     "FIELDS", "ATOL", "RTOL", "STEPS", "make_vmas_env", "assert_same_space", "copy_random_state", "copy_state",
-    "copy_start", "uniform_actions", "assert_same_state", "Lockstep", "run_lockstep", "assert_same_infos",
-    "assert_same_outputs",
+    "copy_start", "copy_random_stream", "uniform_actions", "assert_same_state", "Lockstep", "run_lockstep",
+    "assert_same_infos", "assert_same_outputs",
 ]
 
 ATOL = 1e-4
@@ -114,7 +115,11 @@ def copy_state(up, ours) -> None:
 
     The worlds must list the same entities under the same names, in the same
     order. Moving a joint's end re-places its rod between the ends, so the
-    rods (which come before the agents) get their own state back in a second pass.
+    rods (which come before the agents) get their own state back in a second
+    pass. It also makes a joint that does not let its end turn (``rotate=False``
+    without a ``fixed_rotation``) take the end's current angle to the rod as
+    the one to hold, where VMAS holds the angle it had at reset; each such
+    angle, [B, 1], is copied from VMAS's joint afterwards.
     """
     _same_entities(up, ours)
     for _ in range(2):
@@ -123,6 +128,11 @@ def copy_state(up, ours) -> None:
                 value = getattr(e_up.state, field_name)
                 if not torch.equal(getattr(e_ours.state, field_name), value):
                     getattr(e_ours, f"set_{field_name}")(value.clone(), batch_index=None)
+    held = {frozenset((c.entity_a.name, c.entity_b.name)): c.fixed_rotation for c in up.world.joints}
+    for constraint in ours.world.joints:
+        angle = held.get(frozenset((constraint.entity_a.name, constraint.entity_b.name)))
+        if isinstance(angle, torch.Tensor):
+            constraint.fixed_rotation = angle.clone()
 
 
 def copy_start(up, ours, scenario_state: Optional[Callable[[object, object], None]] = None) -> None:
@@ -135,6 +145,21 @@ def copy_start(up, ours, scenario_state: Optional[Callable[[object, object], Non
     copy_state(up, ours)
     if scenario_state is not None:
         scenario_state(up, ours)
+
+
+def copy_random_stream(up, ours) -> None:
+    """Give ours VMAS's torch random stream (on the CPU) where VMAS's reset left it.
+
+    VMAS keeps one stream for all its envs (``Environment.vmas_random_state``),
+    ours one per env. A scenario whose reset draws other numbers than VMAS's
+    (one draw per env where VMAS draws one per batch, for instance) leaves the
+    two streams at different places, and every observation noise drawn after
+    that would differ; from here on both draw from the same place. VMAS keeps
+    no CUDA stream, so on a GPU noisy observations cannot be compared.
+    """
+    state = getattr(up, "vmas_random_state", None)
+    if state is not None:
+        ours._rng_state["torch"] = state[0].clone()  # the env's own streams (envs/environment.py)
 
 
 # ---------------------------------------------------------------- comparisons

@@ -14,6 +14,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.debug.test_circle_trajectory import keep_upstream_rng, lockstep_actions  # noqa: F401
 from test.scenarios.harness import SPACE_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import asym_joint as scenario
 
@@ -26,10 +27,6 @@ CUSTOM = {
 
 def make(num_envs: int = 6, **kwargs):
     return harness.make(scenario.Scenario(), num_envs, **kwargs)
-
-
-def copy_shaping(up, ours) -> None:
-    ours.scenario.shaping = up.scenario.joint.rot_shaping_pre.clone()
 
 
 def test_construction_and_kwargs():
@@ -66,7 +63,7 @@ def test_spaces_match_upstream(mode):
                          ids=["default", "custom", "mass-position"])
 def test_matches_upstream_vmas(kwargs, keep_upstream_rng):  # noqa: F811
     up, ours = harness.make_upstream(NAME, 6, **kwargs), make(6, **kwargs)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.asym_joint)
     seen = run_lockstep(up, ours, seed=0, actions=lockstep_actions(up, ours, sync_noise=True), steps=30)
     assert seen.largest_reward > 0.1 and seen.fastest > 0.1
 

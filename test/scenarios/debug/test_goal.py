@@ -7,6 +7,7 @@ import torch
 from test.scenarios import harness
 from test.scenarios.debug.test_circle_trajectory import lockstep_actions
 from test.scenarios.harness import SPACE_MODES
+from vmas_ros.testing import vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import goal as scenario
 
@@ -19,11 +20,6 @@ CUSTOM = {
 
 def make(num_envs: int = 6, **kwargs):
     return harness.make(scenario.Scenario(), num_envs, **kwargs)
-
-
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps the last distance to the goal (x pos_shaping_factor) on its goal landmark."""
-    ours.scenario.shaping = up.scenario.goal.pos_shaping.clone()
 
 
 def test_construction_and_kwargs():
@@ -51,7 +47,7 @@ def test_matches_upstream_vmas(kwargs):
     """Random actions from upstream's start; then from goals moved next to the agents, on the
     heuristic, so the goal is reached (reward terms switched off) in some envs."""
     up, ours = harness.make_upstream(NAME, 6, **kwargs), make(6, **kwargs)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.goal)
     seen = run_lockstep(up, ours, seed=0, actions=lockstep_actions(up, ours), steps=30)
     assert seen.largest_reward > 0.01
 
@@ -62,7 +58,7 @@ def test_matches_upstream_vmas(kwargs):
         ours.scenario.goal.set_pos(target.clone(), batch_index=None)
         for env in (up, ours):  # both rewards move on from the new goal
             env.get_from_scenario(False, True, False, False)
-        copy_shaping(up, ours)
+        vmas_states.goal(up, ours)
 
     harness.copy_start(up, ours, goal_nearby)
     policy = scenario.HeuristicPolicy(**kwargs)

@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.testing.parity import run_lockstep
 from vmas_ros.scenarios.debug import het_mass
 
@@ -70,16 +70,10 @@ def test_spaces_match_upstream_and_actions_work(mode):
 
 
 # ------------------------------------------------------------------------- parity
-def copy_masses(up, ours) -> None:
-    """Upstream drew its masses from NumPy at reset; ours must use the same ones."""
-    for a_up, a_ours in zip(up.agents, ours.agents, strict=True):
-        a_ours.mass = a_up.mass
-
-
 @pytest.mark.parametrize("kwargs", [{}, {"green_mass": 1.5, "blue_mass": 6, "mass_noise": 0.5}], ids=["default", "swapped"])
 def test_matches_upstream_vmas(kwargs):
     up, ours = harness.make_upstream(NAME, 8, **kwargs), make(8, **kwargs)
-    harness.copy_start(up, ours, copy_masses)
+    harness.copy_start(up, ours, vmas_states.het_mass)
     assert masses(ours) != [4.0, 2.0]
     seen = run_lockstep(up, ours, seed=0, steps=50)
     assert seen.fastest > 0.05 and seen.largest_reward > 0.1
