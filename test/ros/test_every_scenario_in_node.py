@@ -55,8 +55,10 @@ def test_compiled_node_publishes_what_the_eager_node_publishes(on_test_context):
         for _ in range(3):
             for node in nodes:
                 node.step_once()
-        # the compiled node's snapshot comes from its step (ride_along.py), the eager one's is gathered after
-        assert nodes[0].ride_along is None and nodes[1].ride_along is not None and nodes[1].ride_along.active
+        # the compiled node's snapshot comes from its step (simulator/env_snapshot.py), the eager one's is
+        # gathered after
+        eager_source, compiled_source = (node.snapshot.source for node in nodes)
+        assert not eager_source.rides_along and compiled_source.rides_along and compiled_source.computed_by_step
         eager, compiled = (node.state_messages for node in nodes)
         for topic in eager.topics:
             if topic.endswith("/pose"):

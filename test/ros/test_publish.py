@@ -1,12 +1,12 @@
-"""sim_node's bulk output (publish.py, lidar_batch.py) against the straightforward conversion.
+"""sim_node's bulk output (publish.py, convert.PublishedEnv) against the straightforward conversion.
 
-The node publishes pre-serialised bytes filled in bulk and casts all lidars in
-one batch. Both must be invisible to consumers: for random states, every
-message must have the length of, and decode to exactly the same fields as,
-``serialize_message`` of a message filled field by field with ``convert`` (the
-node's conversion before the bulk path; decoded because the serialiser leaves
-CDR padding bytes uninitialised), and every batched lidar reading must equal
-``Lidar.measure()`` bit for bit.
+The node publishes pre-serialised bytes filled in bulk, from the engine's
+snapshot of the published env. Both must be invisible to consumers: for random
+states, every message must have the length of, and decode to exactly the same
+fields as, ``serialize_message`` of a message filled field by field with
+``convert`` (the node's conversion before the bulk path; decoded because the
+serialiser leaves CDR padding bytes uninitialised), and the node's snapshot
+must equal the one gathered from the state, each lidar cast alone.
 """
 from __future__ import annotations
 
@@ -27,8 +27,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 import vmas_ros
 from vmas_ros.ros import convert
-from vmas_ros.simulator.lidar_batch import BatchedLidars, cast_together
-from vmas_ros.ros.publish import LidarReadings, StateMessages
+from vmas_ros.ros.publish import StateMessages
+from vmas_ros.simulator import lidar_batch
 from vmas_ros.simulator.sensors import Lidar
 
 
@@ -155,59 +155,33 @@ def test_bulk_payloads_deserialise_to_the_state():
     assert (clock.clock.sec, clock.clock.nanosec) == (12, 500_000_000)
 
 
-@pytest.mark.parametrize("scenario, kwargs", [("simple_spread", {"n_agents": 4}), ("waterfall", {}), ("wheel", {}),
-                                              ("passage", {})])
-@pytest.mark.parametrize("num_envs", [1, 5])
-def test_batched_lidars_equal_measure(scenario, kwargs, num_envs):
-    env = vmas_ros.make_env(scenario, num_envs=num_envs, seed=2, **kwargs)
-    _with_lidars(env, (12,), max_range=1.5)
-    sensors = [s for a in env.world.agents for s in a.sensors if isinstance(s, Lidar)]
-    batched = BatchedLidars()
-    rng = torch.Generator().manual_seed(11)
-    compared = 0
-    for _ in range(8):
-        _randomise(env, rng)
-        readings = batched.cast(env.world, sensors)
-        if readings is None:  # differing box/line targets: the caller measures one by one
-            continue
-        for sensor, reading in zip(sensors, readings):
-            assert torch.equal(reading, sensor.measure())
-        compared += 1
-    assert compared > 0
-
-
-def test_batching_needs_equal_ray_counts_and_ranges():
-    env = vmas_ros.make_env("simple_spread", num_envs=1, seed=0, n_agents=2)
-    _with_lidars(env, (8,))
-    world = env.world
-    sensors = [a.sensors[-1] for a in world.agents]
-    assert cast_together(world, sensors[:1]) is None
-    world.agents[0].add_sensor(Lidar(world, n_rays=9, max_range=2.0))
-    assert cast_together(world, [sensors[1], world.agents[0].sensors[-1]]) is None
-    assert len(cast_together(world, sensors)) == 2
-
-
-@pytest.mark.parametrize("scenario", ["discovery", "flocking"])
-def test_a_lidar_the_scenario_measured_this_step_is_not_cast_again(scenario):
-    env = vmas_ros.make_env(scenario, num_envs=2, seed=0)
+def test_the_published_env_is_the_gathered_snapshot_and_reuses_the_scenarios_readings(monkeypatch):
+    """The node's snapshot (PublishedEnv, built as sim_node builds it) equals the state and every lidar
+    cast alone; a lidar the scenario read in this step (flocking observes through its lidars) is not cast
+    again, only the node's own ones (another layout) are."""
+    env = vmas_ros.make_env("flocking", num_envs=3, seed=0)
     _with_lidars(env, (6,))  # node lidars, which the scenario never reads
     world = env.world
     lidars = convert.agent_lidars(world)
-    readings = LidarReadings(lidars)
-    readings.mark()
-    sensors = [s for ls in lidars.values() for s in ls]
-    marked = {id(s): s.last_measurement for s in sensors}
-    env.step([torch.zeros(2, env.get_agent_action_size(a)) for a in env.agents])
-    measured = {id(s) for s in sensors if s.last_measurement is not marked[id(s)]}
-    assert measured, "the scenario observes through its lidars"
-    taken = readings.take(world)
-    for i, agent_sensors in lidars.items():
-        for sensor, reading in zip(agent_sensors, taken[i]):
-            # a reading the scenario took in this step is handed on as is; the others are cast now
-            assert (reading is sensor.last_measurement) == (id(sensor) in measured)
-            assert torch.equal(reading, sensor.measure())  # either way: the state after the step
-    # without a mark (e.g. the first publish) every lidar is cast
-    first = readings.take(world)
-    for i, sensors in lidars.items():
-        for sensor, reading in zip(sensors, first[i]):
-            assert torch.equal(reading, sensor.measure())
+    published = convert.PublishedEnv(world, lidars)
+    assert not published.source.rides_along
+    scenario_lidars = [s for ls in lidars.values() for s in ls if s.n_rays == 12]
+    node_lidars = [s for ls in lidars.values() for s in ls if s.n_rays == 6]
+    assert len(scenario_lidars) == 4 and len(node_lidars) == len(world.agents)
+    casts = []
+    original = lidar_batch.BatchedLidars.cast
+    monkeypatch.setattr(lidar_batch.BatchedLidars, "cast", lambda *a, **k: casts.append(a[2]) or original(*a, **k))
+    for step in range(3):
+        env.step([torch.zeros(3, env.get_agent_action_size(a)) for a in env.agents])
+        assert casts == [scenario_lidars], "the scenario's lidars, together"
+        snap = published.take(step % 3)
+        assert casts == [scenario_lidars, node_lidars], "then the node's own, together"
+        casts.clear()
+        n = len(world.entities)
+        for k, entity in enumerate(world.entities):
+            np.testing.assert_array_equal(snap.pos[k], entity.state.pos[step % 3].numpy())
+            assert snap.rot[k] == entity.state.rot[step % 3, 0].item()
+        for i, sensors in lidars.items():
+            for sensor, scan in zip(sensors, snap.scans[i], strict=True):
+                np.testing.assert_array_equal(scan, sensor.cast_alone()[step % 3].numpy())
+        assert snap.all_finite() and snap.host.shape == (6 * n + sum(s.n_rays for ls in lidars.values() for s in ls),)

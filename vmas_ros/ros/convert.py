@@ -1,9 +1,11 @@
 """Batched simulator state to standard ROS 2 messages.
 
-The node publishes one env of the batch. ``Snapshot.take`` copies everything
-that env needs to the host in a handful of tensor ops (one gather per
-quantity, not one per entity), and the fill functions then write plain floats
-into message objects that the node creates once and reuses.
+The node publishes one env of the batch. The engine takes everything that
+env needs to the host as one vector (``simulator.env_snapshot``: computed by a
+compiled step itself, or gathered after it in a handful of tensor ops);
+:class:`Snapshot` lays it out per entity and per lidar, and the fill
+functions then write plain floats into message objects that the node creates
+once and reuses.
 """
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 import torch
 
+from vmas_ros.simulator.env_snapshot import EnvSnapshot, gather
 from vmas_ros.simulator.utils import Color
 
 _INVALID = re.compile(r"[^A-Za-z0-9_]")
@@ -53,7 +56,7 @@ class Snapshot:
     #: everything above in one host array: the state's 6 N values, then every scan (see all_finite)
     host: Optional[np.ndarray] = None
     n_state: int = 0
-    #: the all_finite answer when whoever gathered the snapshot worked it out already (ride_along.py)
+    #: the all_finite answer when whoever took the snapshot worked it out already (a compiled step)
     finite: Optional[bool] = None
 
     def all_finite(self) -> bool:
@@ -67,31 +70,16 @@ class Snapshot:
         return bool(np.isfinite(self.host[: self.n_state]).all() and not np.isnan(self.host[self.n_state:]).any())
 
     @staticmethod
-    def take(world, env_index: int, lidars: Dict[int, list],
-             measurements: Optional[Dict[int, List[torch.Tensor]]] = None) -> "Snapshot":
-        """Env ``env_index`` with one device-to-host copy: the state of every entity and every scan.
-
-        ``measurements`` (agent index -> one [B, R] tensor per lidar) are readings taken
-        already this step; without them every lidar measures now.
-        """
-        with torch.no_grad():
-            if measurements is None:
-                measurements = {i: [s.measure() for s in sensors] for i, sensors in lidars.items()}
-            # the physics step's own planar state (right after a step: its output, no copy)
-            q, v = world.planar_state()
-            state = torch.cat([q[:, :, env_index], v[:, :, env_index]])  # [6, N]: x, y, angle, vx, vy, wz
-            readings = [m[env_index].reshape(-1) for i in measurements for m in measurements[i]]
-            host = torch.cat([state.reshape(-1)] + [r.to(state.dtype) for r in readings]).cpu().numpy()
-        return Snapshot.of_host(host, {i: [m.shape[-1] for m in tensors] for i, tensors in measurements.items()})
+    def take(world, env_index: int, lidars: Dict[int, list]) -> "Snapshot":
+        """Env ``env_index`` gathered from the current state with one device-to-host copy (every lidar measures)."""
+        host = gather(world, env_index, [s for sensors in lidars.values() for s in sensors])
+        return Snapshot.of_host(host, {i: [s.n_rays for s in sensors] for i, sensors in lidars.items()})
 
     @staticmethod
-    def of_host(host: np.ndarray, rays: Dict[int, List[int]], verdict: bool = False) -> "Snapshot":
-        """The snapshot laid out in ``host``: the ``[6, N]`` state rows (x, y, angle, vx, vy, wz), then the
-        scans, ``rays[agent]`` values per lidar in that order (views into ``host``, no copies); with
-        ``verdict``, a last value that is non-zero when :meth:`all_finite` holds."""
-        finite = None
-        if verdict:
-            finite, host = bool(host[-1]), host[:-1]
+    def of_host(host: np.ndarray, rays: Dict[int, List[int]], finite: Optional[bool] = None) -> "Snapshot":
+        """The snapshot laid out in ``host`` (``env_snapshot.EnvVector.values``): the ``[6, N]`` state rows
+        (x, y, angle, vx, vy, wz), then the scans, ``rays[agent]`` values per lidar in that order (views into
+        ``host``, no copies); ``finite``: the :meth:`all_finite` answer when it is known already."""
         n_state = host.size - sum(n for counts in rays.values() for n in counts)
         state = host[:n_state].reshape(6, -1)
         scans, offset = {}, n_state
@@ -101,6 +89,23 @@ class Snapshot:
                 scans[i].append(host[offset: offset + n])
                 offset += n
         return Snapshot(state[0:2].T, state[3:5].T, state[2], state[5], scans, host, n_state, finite)
+
+
+class PublishedEnv:
+    """The published env's :class:`Snapshot` after each step, from the engine's ``EnvSnapshot``.
+
+    Built once with the node's world and lidars (``agent_lidars``); the
+    engine chooses then how every snapshot is taken. ``take(env_index)``
+    after a step or a reset.
+    """
+
+    def __init__(self, world, lidars: Dict[int, list]) -> None:
+        self.source = EnvSnapshot(world, [s for sensors in lidars.values() for s in sensors])
+        self._rays = {i: [s.n_rays for s in sensors] for i, sensors in lidars.items()}
+
+    def take(self, env_index: int) -> Snapshot:
+        vector = self.source.take(env_index)
+        return Snapshot.of_host(vector.values, self._rays, vector.finite)
 
 
 def set_pose(pose, x: float, y: float, yaw: float) -> None:

@@ -292,60 +292,13 @@ class StatePublisher:
                 record(publisher.topic_name, kind, data[a:b])
 
 
-class LidarReadings:
-    """This step's reading of every lidar, cast once per step.
-
-    A scenario that observes through a lidar (e.g. discovery, flocking) has already
-    cast its rays inside ``env.step``; measuring again to publish would double the
-    most expensive part of the node's step. ``mark()`` before a step or reset
-    remembers each lidar's last reading; ``take()`` afterwards reuses a reading that
-    is newer than the mark (observations and rewards are computed after the physics,
-    so it describes the new state) and measures the others.
-    """
-
-    def __init__(self, lidars: Dict[int, list]) -> None:
-        from vmas_ros.simulator.lidar_batch import BatchedLidars
-
-        self.lidars = lidars
-        self._marks: Optional[Dict[int, list]] = None
-        self._batched = BatchedLidars()
-        self._compiled: Dict[tuple, object] = {}  # per group: a CompiledCast, for worlds that compile their physics
-
-    def mark(self) -> None:
-        self._marks = {i: [s.last_measurement for s in sensors] for i, sensors in self.lidars.items()}
-
-    def take(self, world) -> Dict[int, list]:
-        """agent index -> this step's reading of each of its lidars; the stale ones cast in one batch."""
-        marks, self._marks = self._marks, None
-        readings: Dict[int, list] = {}
-        stale = []  # (agent, lidar index, sensor)
-        for i, sensors in self.lidars.items():
-            readings[i] = []
-            for j, sensor in enumerate(sensors):
-                last = sensor.last_measurement
-                fresh = marks is not None and last is not None and last is not marks[i][j]
-                readings[i].append(last if fresh else None)
-                if not fresh:
-                    stale.append((i, j, sensor))
-        groups: Dict[tuple, list] = {}  # lidars of one ray count and range are cast together
-        for entry in stale:
-            groups.setdefault((entry[2].n_rays, float(entry[2].max_range)), []).append(entry)
-        for key, group in groups.items():
-            sensors = [s for _, _, s in group]
-            batched = None
-            if world.physics_compiled:  # one compiled cast (equal to measure() to float rounding)
-                from vmas_ros.simulator.lidar_batch import CompiledCast
-
-                batched = self._compiled.setdefault(key, CompiledCast()).cast(world, sensors)
-            if batched is None:
-                batched = self._batched.cast(world, sensors)
-            for k, (i, j, sensor) in enumerate(group):
-                readings[i][j] = batched[k] if batched is not None else sensor.measure()
-        return readings
-
-
 class StepPhases:
-    """Wall time of each part of sim_node's step, summed (``vmas-ros bench node`` reads it)."""
+    """Wall time of each part of sim_node's step, summed (``vmas-ros bench node`` reads it).
+
+    actions; engine (``env.step``); lidar: the published env's snapshot from the engine (its lidar
+    casts and the copy to the host, or taking what a compiled step computed); convert: laying it out and
+    filling the messages; publish.
+    """
 
     NAMES = ("actions", "engine", "lidar", "convert", "publish")
 

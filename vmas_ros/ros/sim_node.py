@@ -13,9 +13,10 @@ services   ~/reset (Trigger), ~/pause (SetBool), ~/step (Trigger).
 
 All stamps are simulation time, which advances by the world's dt per step.
 No physics lives here: this file converts tensors to messages and back. The
-per-step state topics are filled in bulk as pre-serialised bytes (publish.py),
-every lidar is cast once per step in one batch (simulator/lidar_batch.py), and unpaced
-(real_time_factor 0) the node runs several steps per timer callback.
+engine hands over the published env after each step as one host vector
+(simulator/env_snapshot.py, read through convert.PublishedEnv), the per-step
+state topics are filled in bulk as pre-serialised bytes (publish.py), and
+unpaced (real_time_factor 0) the node runs several steps per timer callback.
 """
 from __future__ import annotations
 
@@ -40,13 +41,13 @@ from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, run_checked, unknown_parameters, validate
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
-from vmas_ros.ros.publish import LidarReadings, StatePublisher, StateMessages, StepPhases
-from vmas_ros.ros.ride_along import RideAlongSnapshot
+from vmas_ros.ros.publish import StatePublisher, StateMessages, StepPhases
 from vmas_ros.ros.stepping import StepLoop
 from vmas_ros.ros.topic_audit import QosAudit, TopicAudit, quiet_subscription_events
 from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.heuristic_policy import heuristic_actions
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
+from vmas_ros.simulator.threads import limit_threads_for_small_batches
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
@@ -139,10 +140,7 @@ class SimNode(StepLoop, Node):
     # ------------------------------------------------------------------ building
     def _build_env(self) -> None:
         p = self.params
-        if p.num_envs <= 256 and torch.get_num_threads() > 1:
-            # small batches gain nothing from intra-op threads, and on a busy machine
-            # contended threads make tiny kernels wait on each other: keep one
-            torch.set_num_threads(1)
+        limit_threads_for_small_batches(p.num_envs)
         try:
             device = resolve_device(p.device)
             self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed, **p.kwargs())
@@ -162,11 +160,13 @@ class SimNode(StepLoop, Node):
             # the step and its LIDAR casts through torch.compile; compiled on the first step (seconds)
             world.compile_physics()
             self.get_logger().info("compile_physics: the first step compiles the step (a few seconds on a CPU)")
+        self.lidars = convert.agent_lidars(world)
+        # how the published env is taken after each step is the engine's choice, made here once
+        self.snapshot = convert.PublishedEnv(world, self.lidars)
 
     def _build_io(self) -> None:
         world = self.env.world
         self.agent_names = convert.unique_names([a.name for a in world.agents])
-        self.lidars = convert.agent_lidars(world)
         self.scan_geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in self.lidars.items()}
         frame = self.params.frame_id
         for i, name in enumerate(self.agent_names):
@@ -186,9 +186,6 @@ class SimNode(StepLoop, Node):
         if self._per_env_colours:
             self.state_messages.set_colour_fields(self._per_env_colours)
         self.state_pub = StatePublisher(self, self.state_messages, RELIABLE)
-        # compiled, few envs: the step itself gathers env_index's state and scans (ride_along.py)
-        self.ride_along = RideAlongSnapshot(self.lidars) if RideAlongSnapshot.suits(world, self.lidars) else None
-        self.lidar_readings = LidarReadings(self.lidars)
         self.phases: Optional[StepPhases] = None  # set by `vmas-ros bench node` to time each part of a step
         self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
         if self.tf_pub is None:
@@ -353,7 +350,6 @@ class SimNode(StepLoop, Node):
 
     # ------------------------------------------------------------------ services
     def _on_reset(self, request, response):
-        self.lidar_readings.mark()
         self.obs, self.rewards = self.env.reset(), None  # no reward until the next step
         self._commands.clear()
         self.agent_topics.clear()

@@ -90,7 +90,6 @@ class StepLoop:
                 phases.add("actions", start)
                 start = time.perf_counter()
             stage = "engine"
-            self.lidar_readings.mark()  # a reading the scenario takes during the step is reused, not cast again
             self.obs, self.rewards, _, _ = self.env.step(actions)
             self.steps += 1
             if phases is not None:
@@ -143,13 +142,10 @@ class StepLoop:
         p, phases = self.params, self.phases
         world = self.env.world
         start = time.perf_counter() if phases is not None else 0.0
-        snap = None if self.ride_along is None else self.ride_along.take(world, p.env_index)
-        if snap is None:  # not gathered by the step: cast the lidars, then gather
-            readings = self.lidar_readings.take(world)
-            if phases is not None:
-                phases.add("lidar", start)
-                start = time.perf_counter()
-            snap = convert.Snapshot.take(world, p.env_index, self.lidars, readings)
+        snap = self.snapshot.take(p.env_index)  # computed by a compiled step, or gathered now
+        if phases is not None:
+            phases.add("lidar", start)
+            start = time.perf_counter()
         self._check_finite(snap)
         colours = None
         if self._per_env_colours:  # e.g. goal colours drawn per env at reset

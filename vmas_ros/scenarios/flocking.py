@@ -41,7 +41,6 @@ from torch import Tensor
 from vmas_ros.scenarios.common import for_index, pair_distances, read_kwargs, sample_clear_positions, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
-from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import Color
@@ -94,7 +93,6 @@ class Scenario(BaseScenario):
             ))
 
         self._index = {agent.name: i for i, agent in enumerate(world.policy_agents)}
-        self._lidars = AgentLidars(world, world.policy_agents)
         radii = torch.tensor([a.shape.radius for a in world.agents], device=device)
         self._radii_i, self._radii_j = radii.view(-1, 1, 1), radii.view(1, -1, 1)  # [A, A, B] broadcasts
         self._not_self = ~torch.eye(len(world.agents), dtype=torch.bool, device=device).unsqueeze(-1)
@@ -166,7 +164,7 @@ class Scenario(BaseScenario):
 
     def observation(self, agent: Agent) -> Tensor:
         return torch.cat([
-            agent.state.pos, agent.state.vel, agent.state.pos - self.target.state.pos, self._lidars.reading(agent),
+            agent.state.pos, agent.state.vel, agent.state.pos - self.target.state.pos, agent.sensors[0].measure(),
         ], dim=-1)
 
     def info(self, agent: Agent) -> dict[str, Tensor]:

@@ -63,7 +63,6 @@ from vmas_ros.scenarios.common import for_index as shaped_for
 from vmas_ros.scenarios.common import heuristic_kwargs, range_links, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
-from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import ScenarioUtils, TorchUtils
@@ -180,7 +179,6 @@ class Scenario(BaseScenario):
             goal_slots(self.n_agents, self.agents_with_same_goal, self.split_goals), device=world.device
         )
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
-        self._lidars = AgentLidars(world, world.agents) if self.collisions else None
         #: [n, n] bool: pairs of distinct agents
         self._others = ~torch.eye(self.n_agents, dtype=torch.bool, device=world.device)
         #: per env [B, n]: each agent's distance to its goal x pos_shaping_factor, as of the last reward
@@ -265,7 +263,7 @@ class Scenario(BaseScenario):
             to_goals = [agent.state.pos - agent.goal.state.pos]
         parts = [agent.state.pos, agent.state.vel, *to_goals]
         if self.collisions:
-            parts.append(self.lidar_range - self._lidars.reading(agent))
+            parts.append(self.lidar_range - agent.sensors[0].measure())
         return torch.cat(parts, dim=-1)
 
     def info(self, agent: Agent) -> dict:

@@ -59,7 +59,6 @@ from torch import Tensor
 from vmas_ros.scenarios.common import for_index, heuristic_kwargs, range_links, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
-from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 
@@ -147,7 +146,6 @@ class Scenario(BaseScenario):
                 shape=Sphere(radius=self.agent_radius), sensors=sensors,
             ))
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
-        self._lidars = AgentLidars(world, world.agents) if self.collisions else None
 
         device = world.device
         self._variance = torch.tensor(self.variances, device=device)  # [G]
@@ -258,8 +256,8 @@ class Scenario(BaseScenario):
     # ------------------------------------------------------------- observation
     def observation(self, agent: Agent) -> Tensor:
         parts = [agent.state.pos, agent.state.vel]
-        if self._lidars is not None:
-            parts.append(self._lidars.reading(agent))
+        if self.collisions:
+            parts.append(agent.sensors[0].measure())
         around, _ = self.probe(agent.state.pos.unsqueeze(1) + self._neighbours, normalise=True)
         parts.append(around)
         return torch.cat(parts, dim=-1)

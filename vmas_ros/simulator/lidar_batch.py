@@ -1,21 +1,25 @@
-"""Every agent's lidar in one batched ray cast, equal to each ``Lidar.measure()``.
+"""Several lidars in one ray cast: the batched strategies of ``lidars.LidarCaster``.
 
-``Lidar.measure`` casts one agent's rays against its targets: with four agents
-that is four rounds of the same dozen small tensor ops, and at one env each op
-is pure overhead. Callers that need every lidar every step (sim_node) cast them
-together: rays ``[L, B, R]`` of all L lidars against the
-union of their targets ``[E, ...]``, each lidar's non-targets masked out before
-the nearest hit is taken. The intersection functions are the engine's own
-(``vmas_ros.simulator.raycast``), elementwise, so every (lidar, target, ray)
-distance is the same number ``measure`` computes.
+``Lidar.cast_alone`` casts one agent's rays against its targets: with four
+agents that is four rounds of the same dozen small tensor ops, and at one env
+each op is pure overhead. :class:`BatchedLidars` casts them together: rays
+``[L, B, R]`` of all L lidars against the union of their targets ``[E, ...]``,
+each lidar's non-targets masked out before the nearest hit is taken. The
+intersection functions are the engine's own (``vmas_ros.simulator.raycast``),
+elementwise, so every (lidar, target, ray) distance is the same number the
+lidar alone computes.
 
 Exactness needs care only with trigonometry, whose vectorised and scalar kernels
 may differ in the last bit: the ray directions come from each lidar's own
-``ray_directions()``, as in ``measure``, and box/line headings only when
-every lidar has the same targets of that kind (the same stacked tensor as in
-``measure``). Lidars that do not fit (another ray count or range, or differing
-box/line targets) are measured one by one. test/ros/test_publish.py compares the
-two bit for bit.
+``ray_directions()``, as when it is cast alone, and box/line headings only when
+every lidar has the same targets of that kind (the same stacked tensor as
+alone). Lidars that do not fit (another ray count or range, or differing
+box/line targets) are refused (None) and cast one by one.
+test/simulator/test_lidar_batch.py compares the two bit for bit.
+
+:class:`CompiledCast` is the same for worlds that compile their physics: one
+compiled function of the planar state (:func:`lidar_kernel`, sphere targets
+only), which ``env_snapshot`` also runs inside the compiled step.
 """
 from __future__ import annotations
 
@@ -28,6 +32,10 @@ import torch
 
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator.compiling import WorldKernel
+
+
+#: target sets :class:`BatchedLidars` keeps plans for (more are planned again)
+MAX_PLANS = 64
 
 
 @dataclass
@@ -44,8 +52,8 @@ class _Group:
 class BatchedLidars:
     """Casts several lidars at once; the per-target-set constants are built once and cached.
 
-    Entity filters are evaluated every step (they may depend on state); only a
-    new set of targets builds (and validates) a new plan.
+    Entity filters are asked on every cast (they may depend on the state); only
+    a new set of targets builds (and validates) a new plan.
     """
 
     def __init__(self) -> None:
@@ -58,7 +66,7 @@ class BatchedLidars:
             per_lidar = [[e for e in t if e.shape.kind == kind] for t in targets]
             ids = [[id(e) for e in g] for g in per_lidar]
             if kind != "sphere" and any(g and g != ids[0] for g in ids):
-                return None  # headings would be stacked differently from measure(): not provably equal
+                return None  # headings would be stacked differently from a cast alone: not provably equal
             members = [set(g) for g in ids]
             union = [e for e in world.entities if any(id(e) in m for m in members)]
             if not union:
@@ -87,14 +95,16 @@ class BatchedLidars:
         if any(s.n_rays != n_rays or float(s.max_range) != max_range for s in sensors):
             return None
         targets = [world.ray_targets(s.agent, s.entity_filter) for s in sensors]
-        key = (tuple(id(s) for s in sensors), tuple(tuple(id(e) for e in t) for t in targets))
+        key = (world.device, tuple(id(s) for s in sensors), tuple(tuple(id(e) for e in t) for t in targets))
         if key not in self._plans:
+            if len(self._plans) >= MAX_PLANS:  # filters that read the state may pick new targets every step
+                self._plans.clear()
             self._plans[key] = self._plan(world, sensors, targets)
         groups = self._plans[key]
         if groups is None:
             return None
         with contextlib.nullcontext() if keep_grad else torch.no_grad():
-            # per lidar, exactly measure()'s ray directions
+            # per lidar, exactly the ray directions of its cast alone
             directions = [s.ray_directions() for s in sensors]
             cos_a = torch.stack([c for c, _ in directions]).unsqueeze(0)  # [1, L, B, R]
             sin_a = torch.stack([s for _, s in directions]).unsqueeze(0)
@@ -104,13 +114,13 @@ class BatchedLidars:
             for group in groups:
                 pos = torch.stack([e.state.pos for e in group.union]).unsqueeze(1)  # [E, 1, B, 2]
                 cx, cy = pos[..., 0:1], pos[..., 1:2]
-                if group.kind == "sphere":  # the nearest hit over the group, as measure() casts it
+                if group.kind == "sphere":  # the nearest hit over the group, as a cast alone
                     ignore = (~group.mask).to(cos_a.dtype) if group.partial else None
                     nearest = torch.minimum(nearest, raycast.ray_sphere_nearest_xy(
                         ox, oy, cos_a, sin_a, cx, cy, group.sizes[0], max_range, ignore=ignore))
                     continue
                 else:
-                    rot = torch.stack([e.state.rot for e in group.union])  # [E, B, 1], as measure() stacks it
+                    rot = torch.stack([e.state.rot for e in group.union])  # [E, B, 1], as a cast alone stacks it
                     cos_r, sin_r = torch.cos(rot).unsqueeze(1), torch.sin(rot).unsqueeze(1)
                     if group.kind == "box":
                         d = raycast.ray_box_xy(ox, oy, cos_a, sin_a, cx, cy, cos_r, sin_r, *group.sizes, max_range)
@@ -121,67 +131,6 @@ class BatchedLidars:
                     d = torch.where(group.mask, d, float("inf"))
                 nearest = torch.minimum(nearest, d.amin(dim=0))
         return list(nearest.unbind(0))
-
-
-def cast_together(world, sensors: Sequence) -> Optional[List[torch.Tensor]]:
-    """One-off :meth:`BatchedLidars.cast` (no plan cache kept)."""
-    return BatchedLidars().cast(world, sensors)
-
-
-#: AgentLidars casts all lidars together while envs x rays is at most this (measured: faster below, slower above)
-BATCH_BELOW_ELEMENTS = 8192
-#: the same for compiled worlds' one-graph cast (measured: faster below; above, one lidar's
-#: temporaries stay in cache where all lidars' together do not)
-COMPILED_BATCH_BELOW_ELEMENTS = 32768
-
-
-class AgentLidars:
-    """Every agent's lidar in one sensor slot, cast together once per world state.
-
-    For scenario observations: the environment asks for one agent's
-    observation at a time, and each ``Lidar.measure()`` is a dozen tensor ops
-    over ``[targets, envs, rays]``. The first agent asked casts all of them in
-    one batch (bit-equal to ``measure()``, gradients kept); the others read
-    their row. The cast is keyed on the identity of the world's stacked
-    positions and headings, which are rebuilt whenever any entity's state
-    changes (a step, a reset, a ``set_pos``), so a reading is never stale.
-    Large batches measure one lidar at a time instead: there the cost is
-    memory traffic, not calls, and one lidar's ``[targets, envs, rays]``
-    temporaries stay in cache where all lidars' together do not. Lidars that
-    cannot be batched (see :class:`BatchedLidars`) also fall back to
-    ``measure()``. Each sensor's ``last_measurement`` is updated as
-    ``measure()`` would, so rendering shows the rays.
-    """
-
-    def __init__(self, world, agents: Sequence, slot: int = 0) -> None:
-        self._world = world
-        self._sensors = [agent.sensors[slot] for agent in agents]
-        self._row = {agent.name: i for i, agent in enumerate(agents)}
-        self._batched = BatchedLidars()
-        self._key: Optional[torch.Tensor] = None
-        self._readings: List[torch.Tensor] = []
-        self._compiled = CompiledCast()  # compiled worlds: all lidars as one compiled function of the state
-
-    def reading(self, agent) -> torch.Tensor:
-        """``agent``'s lidar distances ``[B, n_rays]`` in the current state."""
-        world = self._world
-        q, _ = world.planar_state()  # the same object until the state changes
-        if self._key is not q:
-            self._key, self._readings = q, self._cast()
-        return self._readings[self._row[agent.name]]
-
-    def _cast(self) -> List[torch.Tensor]:
-        world = self._world
-        readings = None
-        if world.physics_compiled and world.batch_dim * self._sensors[0].n_rays <= COMPILED_BATCH_BELOW_ELEMENTS:
-            readings = self._compiled.cast(world, self._sensors)
-        if readings is None and world.batch_dim * self._sensors[0].n_rays <= BATCH_BELOW_ELEMENTS:
-            readings = self._batched.cast(world, self._sensors, keep_grad=True)
-        if readings is None:
-            return [sensor.measure() for sensor in self._sensors]
-        for sensor, measured in zip(self._sensors, readings):
-            sensor._last_measurement = measured
-        return readings
 
 
 class CompiledCast:
@@ -204,7 +153,7 @@ class CompiledCast:
         """Readings ``[B, R]`` of ``sensors``, or None when they cannot be cast together (see :func:`_kernel_constants`)."""
         if not same_lidar_layout(self._static, world, sensors):
             targets = tuple(tuple(id(e) for e in world.ray_targets(s.agent, s.entity_filter)) for s in sensors)
-            layout = (tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
+            layout = (world.device, tuple(id(e) for e in world.entities), tuple(id(s) for s in sensors), targets)
             self._static = lidar_layout(world, sensors) if layout_static(sensors) else None
             if self._plan is None or self._plan[0] != layout:
                 cast = castable(world, sensors, targets)
@@ -212,10 +161,7 @@ class CompiledCast:
         kernel = self._plan[1]
         if kernel is None:
             return None
-        readings = list(kernel(world.planar_state()[0]).unbind(0))
-        for sensor, reading in zip(sensors, readings):
-            sensor._last_measurement = reading
-        return readings
+        return list(kernel(world.planar_state()[0]).unbind(0))
 
 
 def layout_static(sensors: Sequence) -> bool:
@@ -279,7 +225,7 @@ def lidar_kernel(q: torch.Tensor, origins: torch.Tensor, targets: torch.Tensor, 
     whose cosines and sines are ``cos0``/``sin0`` ``[L, 1, R]``; ``targets``
     are the entity rows of the spheres, ``ignore`` (float 0/1 ``[E, L, 1, 1]``)
     the (sphere, lidar) pairs a lidar does not see. The same numbers as
-    ``Lidar.measure()`` to float rounding.
+    ``Lidar.cast_alone()`` to float rounding.
     """
     ox, oy = q[0].index_select(0, origins).unsqueeze(-1), q[1].index_select(0, origins).unsqueeze(-1)  # [L, B, 1]
     heading = q[2].index_select(0, origins).unsqueeze(-1)
@@ -289,3 +235,15 @@ def lidar_kernel(q: torch.Tensor, origins: torch.Tensor, targets: torch.Tensor, 
     cy = q[1].index_select(0, targets)[:, None, :, None]
     return raycast.ray_sphere_nearest_xy(ox, oy, cos_a, sin_a, cx, cy, radius, max_range, ignore=ignore)
 
+
+
+class AgentLidars:
+    """Transitional: ``reading(agent)`` is ``agent.sensors[slot].measure()``, which now casts a world's
+    lidars together itself. Only discovery still reads its lidars through this; delete it once discovery
+    calls ``measure()``."""
+
+    def __init__(self, world, agents: Sequence, slot: int = 0) -> None:
+        self._slot = slot
+
+    def reading(self, agent) -> torch.Tensor:
+        return agent.sensors[self._slot].measure()

@@ -1,4 +1,5 @@
-"""Sensors agents carry. The Lidar casts all its rays in one batched call."""
+"""Sensors agents carry. The Lidar casts all its rays in one batched call, and a world's
+lidars are cast together once per state (``lidars.LidarCaster``)."""
 from __future__ import annotations
 
 import abc
@@ -8,9 +9,10 @@ from typing import Callable, List, Optional, Tuple, Union
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.lidars import LidarCaster
 from vmas_ros.simulator.utils import Color
 
-__all__ = ["Sensor", "Lidar", "CollidesWith"]
+__all__ = ["Sensor", "Lidar", "CollidesWith", "world_lidars"]
 
 
 class CollidesWith:
@@ -46,6 +48,10 @@ class Sensor(abc.ABC):
     def agent(self, agent) -> None:
         self._agent = agent
 
+    @property
+    def world(self):
+        return self._world
+
     @abc.abstractmethod
     def measure(self):
         """Take a batched measurement for every env."""
@@ -68,6 +74,13 @@ class Lidar(Sensor):
     ``measure()`` returns distances [batch, n_rays]; ``max_range`` where a ray hits
     nothing that passes ``entity_filter``. A full circle (start == end mod 2 pi)
     spaces rays evenly without duplicating the first one.
+
+    All lidars of a world share one :class:`~vmas_ros.simulator.lidars.LidarCaster`,
+    which casts those of one layout together once per state and decides how
+    (compiled, batched, or each alone); ``measure()`` hands out this lidar's
+    row. An ``entity_filter`` is asked once per state (one that says
+    ``layout_static`` once per world tables), so it may read the world's state
+    but nothing that changes within one state.
     """
 
     def __init__(
@@ -100,6 +113,7 @@ class Lidar(Sensor):
         self._render = render
         self._last_measurement: Optional[Tensor] = None
         self._unit_rays: Optional[tuple] = None  # (device and dtype, cos, sin) of the relative angles [1, R]
+        self._caster: Optional[LidarCaster] = None  # the world's, shared with its other lidars
 
     n_rays = property(lambda self: self._angles.shape[1])
     max_range = property(lambda self: self._max_range)
@@ -152,11 +166,32 @@ class Lidar(Sensor):
         return torch.addcmul(cos0 * cos_r, sin0, sin_r, value=-1), torch.addcmul(sin0 * cos_r, cos0, sin_r)
 
     def measure(self, vectorized: bool = True) -> Tensor:
-        """Distances [batch, n_rays]; all rays and target entities in one batched cast."""
-        cos_a, sin_a = self.ray_directions()
-        measurement = self._world.cast_rays_along(self._agent, cos_a, sin_a, self._max_range, self._entity_filter)
+        """Distances [batch, n_rays] in the current state (read-only: shared with whoever asks in this state).
+
+        Cast together with the world's other lidars of this layout (see
+        :mod:`vmas_ros.simulator.lidars`): bit-equal to :meth:`cast_alone` on
+        an eager world, equal to float rounding on one that compiles its
+        physics. ``vectorized`` is VMAS's argument; every cast here is.
+        """
+        measurement = self._world_caster().reading(self)
         self._last_measurement = measurement
         return measurement
+
+    def cast_alone(self) -> Tensor:
+        """Distances [batch, n_rays] from this lidar's own cast: all its rays against all its targets at once."""
+        cos_a, sin_a = self.ray_directions()
+        return self._world.cast_rays_along(self._agent, cos_a, sin_a, self._max_range, self._entity_filter)
+
+    def _world_caster(self) -> LidarCaster:
+        """The caster of this lidar's world: the one its other lidars have, else a new one for all of them."""
+        if self._caster is None:
+            lidars = world_lidars(self._world)
+            caster = next((lidar._caster for lidar in lidars if lidar._caster is not None), None)
+            caster = caster if caster is not None else LidarCaster(world_lidars)
+            for lidar in lidars + [self]:
+                if lidar._caster is None:
+                    lidar._caster = caster
+        return self._caster
 
     def render(self, env_index: int = 0) -> List:
         from vmas_ros.simulator import rendering
@@ -180,3 +215,8 @@ class Lidar(Sensor):
             tip.set_color(*self.render_color, alpha=self._alpha)
             geoms += [ray, tip]
         return geoms
+
+
+def world_lidars(world) -> List[Lidar]:
+    """Every agent's lidars, agent by agent, in sensor order."""
+    return [sensor for agent in world.agents for sensor in agent.sensors if isinstance(sensor, Lidar)]
