@@ -239,6 +239,37 @@ def test_shared_reward_and_no_respawn_until_done():
     assert dones.all() and (infos[0]["targets_covered"] == 1).all()
 
 
+@pytest.mark.slow
+def test_compiled_world_compiles_the_reward_terms_too(monkeypatch):
+    """With the physics compiled, the reward terms (``batched_outputs``) are compiled with it: no step
+    evaluates them eagerly (the eager world does, once a step). Rewards, infos and respawns equal the
+    eager world's (EASY kwargs: targets are covered and respawn during the run; the respawn's random
+    draws are the same on both)."""
+    eager_calls = []
+    reward_terms = discovery.reward_terms
+
+    def counted(*args):
+        if not torch.compiler.is_compiling():  # tracing is not an evaluation
+            eager_calls.append(1)
+        return reward_terms(*args)
+
+    monkeypatch.setattr(discovery, "reward_terms", counted)
+    eager, compiled = make(8, **EASY), make(8, compile_physics=True, **EASY)
+    gen = torch.Generator().manual_seed(4)
+    covered = 0
+    for step in range(8):
+        actions = [torch.rand(8, 2, generator=gen) * 2 - 1 for _ in eager.agents]
+        _, rews, _, infos = eager.step([a.clone() for a in actions])
+        assert len(eager_calls) == step + 1
+        _, rews_c, _, infos_c = compiled.step([a.clone() for a in actions])
+        assert len(eager_calls) == step + 1, f"step {step}: the compiled world evaluated its outputs eagerly"
+        for mine, theirs in zip(rews_c + infos_c, rews + infos, strict=True):
+            torch.testing.assert_close(mine, theirs, atol=1e-5, rtol=0)
+        torch.testing.assert_close(stack(compiled.scenario.targets), stack(eager.scenario.targets), atol=1e-5, rtol=0)
+        covered += int(infos[0]["targets_covered"].sum())
+    assert covered > 0  # the run exercised the respawn
+
+
 # ------------------------------------------------------------------ long rollouts
 def test_long_rollouts_stay_finite_and_solid():
     """300 steps, half the envs random, half heuristic: values finite; agents stay in the arena and

@@ -1,12 +1,13 @@
 """discovery's batched respawn (``respawn_clear``): only covered targets move, they land clear of
-everything in VMAS's order, and where they land is uniform over the clear part of the arena."""
+everything in VMAS's order, where they land is uniform over the clear part of the arena, and computing
+only the envs with a covered target gives the same bits as computing all."""
 from __future__ import annotations
 
 import math
 
 import torch
 
-from vmas_ros.scenarios.discovery import respawn_clear
+from vmas_ros.scenarios.discovery import draw_candidates, respawn_clear, respawn_from
 
 MIN_DIST = 0.2
 
@@ -97,3 +98,22 @@ def test_without_agents_or_covering_nothing_breaks(device):
     new_x, new_y = respawn_clear(empty, empty, tx, ty, all_, MIN_DIST, 1.0, 1.0, 16)
     assert ((new_x != tx) | (new_y != ty)).all()
     assert new_x.device == tx.device and new_x.shape == tx.shape
+
+
+def test_computing_only_the_covered_envs_gives_the_same_bits(device):
+    """Covering in a few envs and on some targets only (as in play), then in every env: both ways of
+    running ``respawn_from`` agree bit for bit, and targets of envs without covering stay."""
+    torch.manual_seed(2)
+    batch, n_agents, n_targets = 500, 5, 7
+    ax, ay = torch.rand(2, n_agents, batch, device=device) * 2 - 1
+    tx, ty = torch.rand(2, n_targets, batch, device=device) * 2 - 1
+    cand_x, cand_y = draw_candidates(batch, 1.0, 1.0, 16, device)
+    few = torch.zeros(n_targets, batch, dtype=torch.bool, device=device)
+    few[2, 7] = few[2, 300] = few[5, 300] = few[6, 41] = True
+    for covered in (few, torch.rand(n_targets, batch, device=device) < 0.4, torch.zeros_like(few)):
+        only = respawn_from(cand_x, cand_y, ax, ay, tx, ty, covered, MIN_DIST ** 2, only_covered_envs=True)
+        every = respawn_from(cand_x, cand_y, ax, ay, tx, ty, covered, MIN_DIST ** 2, only_covered_envs=False)
+        assert torch.equal(only[0], every[0]) and torch.equal(only[1], every[1])
+        moved = (only[0] != tx) | (only[1] != ty)
+        assert not (moved & ~covered).any()
+        assert covered.sum() == 0 or moved[covered].float().mean() > 0.99  # covered targets (almost) always move

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Optional
+from typing import Optional, Sequence
 
 import torch
 from torch import Tensor
@@ -53,11 +53,9 @@ from torch import Tensor
 from vmas_ros.scenarios.common import (
     for_index, pair_distances, range_links, read_kwargs, sample_clear_positions, selected_rows,
 )
-from vmas_ros.simulator.compiling import WorldKernel
 from vmas_ros.simulator.masks import mask_ge, mask_lt
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
-from vmas_ros.simulator.lidar_batch import AgentLidars
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import Color
@@ -125,10 +123,6 @@ class Scenario(BaseScenario):
             self.targets.append(target)
 
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
-        self._lidars = [AgentLidars(world, world.agents, slot) for slot in range(len(world.agents[0].sensors))]
-        # compiled when the world compiles its physics
-        self._respawn, self._reward_terms = WorldKernel(world, respawn_from), WorldKernel(world, reward_terms)
-        self._not_self = ~torch.eye(self.n_agents, dtype=torch.bool, device=device).unsqueeze(-1)  # [N, N, 1]
         #: per env and target: covered at some step of this episode (only grows without respawns) [B, T]
         self.all_time_covered = torch.zeros(batch_dim, self.n_targets, dtype=torch.bool, device=device)
         #: per env and target: covered at the last reward [B, T]
@@ -154,33 +148,34 @@ class Scenario(BaseScenario):
             entity.set_pos(for_index(positions[:, k], env_index), batch_index=env_index)
 
     # ------------------------------------------------------------------ reward
-    def _stack(self, entities) -> Tensor:
-        return torch.stack([e.state.pos for e in entities], dim=1)
+    def batched_outputs(self, q: Tensor, v: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """The reward terms of the state ``q`` ``[3, T + N, B]`` (targets first): see :func:`reward_terms`."""
+        return reward_terms(q[0], q[1], self.n_targets, self.covering_range, self.agents_per_target,
+                            self.covering_rew_coeff, self.agent_collision_penalty)
 
     def _update_rewards(self) -> None:
-        """Every agent's reward terms and the covered targets of this step, in one batched pass.
+        """Keep the reward terms of the state being rewarded.
 
-        On planar rows (``World.stacked_xy``): distances ``[agents, targets, envs]``
-        as ``sqrt(dx * dx + dy * dy)`` and every count a reduction over a leading
-        dim (a norm or a sum over a small trailing dim is a slow path on the CPU).
-        Terms are kept agent-major, ``[n_agents, B]``, so each agent's reward is a row.
+        The respawn then moves the world to a new state, whose outputs differ:
+        the respawn itself and ``info`` need the terms of the state the
+        rewards were computed for, so they read these attributes.
         """
-        x, y = self.world.stacked_xy("pos")  # the targets (landmarks) first, then the agents
-        covered, self.covering_rew, self.shared_covering_rew, self.collision_rew = self._reward_terms(
-            x, y, self.n_targets, self.covering_range, self.agents_per_target, self.covering_rew_coeff,
-            self.agent_collision_penalty, self._not_self)
+        covered, self.covering_rew, self.shared_covering_rew, self.collision_rew = self.outputs()
         self.covered_targets = covered.T  # [B, T]
 
     def _move_covered_targets(self) -> None:
-        """Respawn (or retire) the targets covered this step; runs after every agent's reward."""
+        """Respawn (or retire) the targets covered this step; runs after every agent's reward.
+
+        Plain tensor code, not an output: it writes the state (and draws random numbers).
+        """
         covered = self.covered_targets.T  # [T, B]
         x, y = self.world.stacked_xy("pos")  # targets are the landmarks, the first rows
         n_targets = len(self.targets)
         if self.targets_respawn:
-            # respawn_clear, with the draws made here and the rest as one WorldKernel
+            # respawn_clear; every env draws its candidates every step, so seeded runs repeat exactly
             cand_x, cand_y = draw_candidates(x.shape[1], self.x_semidim, self.y_semidim, RESPAWN_CANDIDATES, x.device)
-            new_x, new_y = self._respawn(cand_x, cand_y, x[n_targets:], y[n_targets:], x[:n_targets], y[:n_targets],
-                                         covered, self.min_dist_between_entities ** 2)
+            new_x, new_y = respawn_from(cand_x, cand_y, x[n_targets:], y[n_targets:], x[:n_targets], y[:n_targets],
+                                        covered, self.min_dist_between_entities ** 2)
         else:
             self.all_time_covered = self.all_time_covered | self.covered_targets
             outside = self._outside_positions(covered.shape)  # [T, B, 2]
@@ -207,7 +202,7 @@ class Scenario(BaseScenario):
 
     # ------------------------------------------------------------- observation
     def observation(self, agent: Agent) -> Tensor:
-        readings = [lidars.reading(agent) for lidars in self._lidars]
+        readings = [sensor.measure() for sensor in agent.sensors]
         return torch.cat([agent.state.pos, agent.state.vel] + readings, dim=-1)
 
     def info(self, agent: Agent) -> dict[str, Tensor]:
@@ -238,12 +233,15 @@ class Scenario(BaseScenario):
 
 def reward_terms(
     x: Tensor, y: Tensor, n_targets: int, covering_range: float, agents_per_target: int, covering_coeff: float,
-    collision_penalty: float, not_self: Tensor,
+    collision_penalty: float,
 ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Covered targets ``[T, B]`` (bool), covering rewards ``[N, B]``, the team's ``[B]`` and collision penalties ``[N, B]``.
 
-    From the planar rows ``x``, ``y`` ``[T + N, B]`` (targets first); a pure
-    function of tensors, run as a ``WorldKernel``.
+    From the planar rows ``x``, ``y`` ``[T + N, B]`` (targets first). What
+    ``Scenario.batched_outputs`` computes: a pure function of the positions.
+    Distances are ``[agents, targets, envs]`` and every count is a reduction
+    over a leading dim (a norm or a sum over a small trailing dim is a slow
+    path on the CPU); terms are agent-major, so each agent's reward is a row.
     """
     tx, ty, ax, ay = x[:n_targets], y[:n_targets], x[n_targets:], y[n_targets:]
     near = pair_distances(ax, ay, tx, ty) < covering_range  # [N, T, B]
@@ -252,6 +250,7 @@ def reward_terms(
     team = covering.sum(dim=0)
     shared = torch.where(team != 0, team / 2, team)  # halved, as in VMAS 1.5
     gap = pair_distances(ax, ay, ax, ay) - 2 * AGENT_RADIUS  # [N, N, B]
+    not_self = ~torch.eye(ax.shape[0], dtype=torch.bool, device=x.device).unsqueeze(-1)  # [N, N, 1]
     touching = (gap < COLLISION_DISTANCE) & not_self
     return covered, covering, shared, touching.sum(dim=1).float() * collision_penalty
 
@@ -295,17 +294,44 @@ def draw_candidates(batch: int, x_semidim: float, y_semidim: float, candidates: 
 
 def respawn_from(
     cand_x: Tensor, cand_y: Tensor, agents_x: Tensor, agents_y: Tensor, targets_x: Tensor, targets_y: Tensor,
-    covered: Tensor, limit: float,
+    covered: Tensor, limit: float, only_covered_envs: Optional[bool] = None,
 ) -> tuple[Tensor, Tensor]:
     """:func:`respawn_clear` given the candidate stream ``[K, B]`` and the squared clearance ``limit``.
 
-    A pure function of tensors (the random draws are made outside), so the
-    scenario runs it as a ``WorldKernel``: compiled with the world, its
-    per-target loop unrolls into one fused graph. Masks are float 0/1.
+    ``only_covered_envs`` (default: on the CPU) runs :func:`respawn_every_env`
+    on just the envs with a covered target: covering is rare, so a few envs a
+    step, often none. Finding them reads the mask, which costs nothing on the
+    CPU but would make a GPU step wait. Each env's result depends on its own
+    column alone, so the bits are the same either way.
+    """
+    if only_covered_envs is None:
+        only_covered_envs = covered.device.type == "cpu"
+    if not only_covered_envs:
+        return respawn_every_env(cand_x, cand_y, agents_x, agents_y, targets_x, targets_y, covered, limit)
+    envs = covered.any(dim=0).nonzero().squeeze(1)  # [M]
+    new_x, new_y = targets_x.clone(), targets_y.clone()
+    if len(envs) > 0:
+        columns = [t.index_select(1, envs) for t in (cand_x, cand_y, agents_x, agents_y, targets_x, targets_y, covered)]
+        moved_x, moved_y = respawn_every_env(*columns, limit, searched=columns[-1].any(dim=1).tolist())
+        new_x.index_copy_(1, envs, moved_x)
+        new_y.index_copy_(1, envs, moved_y)
+    return new_x, new_y
+
+
+def respawn_every_env(
+    cand_x: Tensor, cand_y: Tensor, agents_x: Tensor, agents_y: Tensor, targets_x: Tensor, targets_y: Tensor,
+    covered: Tensor, limit: float, searched: Optional[Sequence[bool]] = None,
+) -> tuple[Tensor, Tensor]:
+    """:func:`respawn_from` computed for every env (column) at once. Masks are float 0/1.
+
+    ``searched``: per target, False where the caller knows it is covered in no
+    env; it then stays without a search for its spot (None: search for all).
     """
     n_targets, batch = targets_x.shape
     candidates = cand_x.shape[0]
     device = targets_x.device
+    searched = [True] * n_targets if searched is None else list(searched)
+    last = max((i for i in range(n_targets) if searched[i]), default=-1)  # the last target that may move
 
     def squared_gaps(px: Tensor, py: Tensor) -> Tensor:  # points [M, B] -> [M, K, B]
         gap_x, gap_y = cand_x - px.unsqueeze(1), cand_y - py.unsqueeze(1)
@@ -323,21 +349,24 @@ def respawn_from(
     bound = torch.full((1, batch), candidates + 1.0, device=device)  # eligible: weight < bound
     new_x, new_y = [], []
     for i in range(n_targets):
-        near = after[i] if before is None else before if after[i] is None else torch.minimum(before, after[i])
-        eligible = free * mask_lt(weights, bound)
-        if near is not None:
-            eligible = eligible.mul_(mask_ge(near, limit))
-        score = eligible.amax(dim=0, keepdim=True)  # [1, B]: the first clear point's weight, 0 if none
-        moved = (score > 0) & covered[i : i + 1]  # [1, B] bool: where on one row is cheap
-        first = (candidates - score).clamp_(max=candidates - 1).long()
-        x = torch.where(moved, cand_x.gather(0, first), targets_x[i : i + 1])
-        y = torch.where(moved, cand_y.gather(0, first), targets_y[i : i + 1])
+        if searched[i]:
+            near = after[i] if before is None else before if after[i] is None else torch.minimum(before, after[i])
+            eligible = free * mask_lt(weights, bound)
+            if near is not None:
+                eligible = eligible.mul_(mask_ge(near, limit))
+            score = eligible.amax(dim=0, keepdim=True)  # [1, B]: the first clear point's weight, 0 if none
+            moved = (score > 0) & covered[i : i + 1]  # [1, B] bool: where on one row is cheap
+            first = (candidates - score).clamp_(max=candidates - 1).long()
+            x = torch.where(moved, cand_x.gather(0, first), targets_x[i : i + 1])
+            y = torch.where(moved, cand_y.gather(0, first), targets_y[i : i + 1])
+            if i < last:
+                gaps, bound = squared_gaps(x, y)[0], torch.where(moved, score, bound)
+        else:  # it stays at its current spot
+            x, y, gaps = targets_x[i : i + 1], targets_y[i : i + 1], to_targets[i]
         new_x.append(x)
         new_y.append(y)
-        if i + 1 < n_targets:
-            gaps = squared_gaps(x, y)[0]
+        if i < last:  # the searches still to come keep clear of its spot
             before = gaps if before is None else torch.minimum(before, gaps)
-            bound = torch.where(moved, score, bound)
     return torch.cat(new_x), torch.cat(new_y)
 
 

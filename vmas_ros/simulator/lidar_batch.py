@@ -234,16 +234,3 @@ def lidar_kernel(q: torch.Tensor, origins: torch.Tensor, targets: torch.Tensor, 
     cx = q[0].index_select(0, targets)[:, None, :, None]  # [E, 1, B, 1]
     cy = q[1].index_select(0, targets)[:, None, :, None]
     return raycast.ray_sphere_nearest_xy(ox, oy, cos_a, sin_a, cx, cy, radius, max_range, ignore=ignore)
-
-
-
-class AgentLidars:
-    """Transitional: ``reading(agent)`` is ``agent.sensors[slot].measure()``, which now casts a world's
-    lidars together itself. Only discovery still reads its lidars through this; delete it once discovery
-    calls ``measure()``."""
-
-    def __init__(self, world, agents: Sequence, slot: int = 0) -> None:
-        self._slot = slot
-
-    def reading(self, agent) -> torch.Tensor:
-        return agent.sensors[self._slot].measure()
