@@ -27,28 +27,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 import vmas_ros
 from vmas_ros.ros import convert
+from test.simulator.lidar_setup import randomise, with_lidars
 from vmas_ros.ros.publish import StateMessages
 from vmas_ros.simulator import lidar_batch
-from vmas_ros.simulator.sensors import Lidar
-
-
-def _with_lidars(env, rays=(12,), max_range=2.0) -> None:
-    """Lidars as sim_node adds them (one per entry of ``rays`` per agent)."""
-    world = env.world
-    for agent in world.agents:
-        for n in rays:
-            agent.add_sensor(Lidar(world, n_rays=n, max_range=max_range,
-                                   entity_filter=lambda e, me=agent: e.collides(me) and me.collides(e)))
-
-
-def _randomise(env, rng: torch.Generator) -> None:
-    """Random poses and velocities, some entities overlapping (negative and +inf ranges both occur)."""
-    b = env.num_envs
-    for e in env.world.entities:
-        e.state.pos = (torch.rand(b, 2, generator=rng) * 2 - 1) * 1.2
-        e.state.vel = torch.rand(b, 2, generator=rng) * 4 - 2
-        e.state.rot = torch.rand(b, 1, generator=rng) * 20 - 10
-        e.state.ang_vel = torch.rand(b, 1, generator=rng) * 6 - 3
 
 
 def _markers(world, frame: str) -> MarkerArray:
@@ -104,7 +85,7 @@ def _reference(world, names: List[str], geometry, snap, stamp_ns: int, frame: st
 ])
 def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays):
     env = vmas_ros.make_env(scenario, num_envs=3, seed=1, **kwargs)
-    _with_lidars(env, rays)
+    with_lidars(env, rays)
     world = env.world
     names = convert.unique_names([a.name for a in world.agents])
     lidars = convert.agent_lidars(world)
@@ -118,7 +99,7 @@ def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays):
     assert len(messages.topics) == len(set(messages.topics)) == 4 + len(names) * (2 + len(rays))
     rng = torch.Generator().manual_seed(7)
     for trial in range(6):
-        _randomise(env, rng)
+        randomise(env, rng)
         env_index = trial % env.num_envs
         stamp_ns = random.Random(trial).randrange(0, 2**31 * 10**9)
         snap = convert.Snapshot.take(world, env_index, lidars)
@@ -138,7 +119,7 @@ def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays):
 
 def test_bulk_payloads_deserialise_to_the_state():
     env = vmas_ros.make_env("simple_spread", num_envs=1, seed=3, n_agents=2)
-    _with_lidars(env)
+    with_lidars(env)
     world = env.world
     lidars = convert.agent_lidars(world)
     geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
@@ -160,7 +141,7 @@ def test_the_published_env_is_the_gathered_snapshot_and_reuses_the_scenarios_rea
     cast alone; a lidar the scenario read in this step (flocking observes through its lidars) is not cast
     again, only the node's own ones (another layout) are."""
     env = vmas_ros.make_env("flocking", num_envs=3, seed=0)
-    _with_lidars(env, (6,))  # node lidars, which the scenario never reads
+    with_lidars(env, (6,))  # node lidars, which the scenario never reads
     world = env.world
     lidars = convert.agent_lidars(world)
     published = convert.PublishedEnv(world, lidars)

@@ -10,28 +10,9 @@ import pytest
 import torch
 
 import vmas_ros
+from test.simulator.lidar_setup import randomise, with_lidars
 from vmas_ros.simulator.lidar_batch import BatchedLidars, CompiledCast
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
-
-
-def _with_lidars(env, rays=(12,), max_range=2.0) -> None:
-    """Lidars as sim_node adds them (one per entry of ``rays`` per agent), with a filter that is not
-    layout-static (asked on every cast)."""
-    world = env.world
-    for agent in world.agents:
-        for n in rays:
-            agent.add_sensor(Lidar(world, n_rays=n, max_range=max_range,
-                                   entity_filter=lambda e, me=agent: e.collides(me) and me.collides(e)))
-
-
-def _randomise(env, rng: torch.Generator) -> None:
-    """Random poses and velocities, some entities overlapping (negative and +inf ranges both occur)."""
-    b = env.num_envs
-    for e in env.world.entities:
-        e.state.pos = ((torch.rand(b, 2, generator=rng) * 2 - 1) * 1.2).to(env.device)
-        e.state.vel = (torch.rand(b, 2, generator=rng) * 4 - 2).to(env.device)
-        e.state.rot = (torch.rand(b, 1, generator=rng) * 20 - 10).to(env.device)
-        e.state.ang_vel = (torch.rand(b, 1, generator=rng) * 6 - 3).to(env.device)
 
 
 @pytest.mark.parametrize("scenario, kwargs", [("simple_spread", {"n_agents": 4}), ("waterfall", {}), ("wheel", {}),
@@ -39,13 +20,13 @@ def _randomise(env, rng: torch.Generator) -> None:
 @pytest.mark.parametrize("num_envs", [1, 5])
 def test_batched_lidars_equal_each_cast_alone(scenario, kwargs, num_envs, device):
     env = vmas_ros.make_env(scenario, num_envs=num_envs, device=device, seed=2, **kwargs)
-    _with_lidars(env, (12,), max_range=1.5)
+    with_lidars(env, (12,), max_range=1.5)
     sensors = [s for a in env.world.agents for s in a.sensors if isinstance(s, Lidar)]
     batched = BatchedLidars()
     rng = torch.Generator().manual_seed(11)
     compared = 0
     for _ in range(8):
-        _randomise(env, rng)
+        randomise(env, rng)
         readings = batched.cast(env.world, sensors)
         if readings is None:  # differing box/line targets: the caster casts each alone
             continue
@@ -57,7 +38,7 @@ def test_batched_lidars_equal_each_cast_alone(scenario, kwargs, num_envs, device
 
 def test_batching_needs_two_lidars_of_equal_ray_counts_and_ranges(device):
     env = vmas_ros.make_env("simple_spread", num_envs=1, device=device, seed=0, n_agents=2)
-    _with_lidars(env, (8,))
+    with_lidars(env, (8,))
     world = env.world
     sensors = [a.sensors[-1] for a in world.agents]
     batched = BatchedLidars()
@@ -102,7 +83,7 @@ def test_a_compiled_cast_refuses_targets_other_than_spheres(device):
     """The compiled kernel knows spheres only: with a box among the targets it refuses (None), and the
     caster casts otherwise. Refusing needs no compile."""
     env = vmas_ros.make_env("passage", num_envs=2, device=device, seed=0)
-    _with_lidars(env, (8,))
+    with_lidars(env, (8,))
     env.world.compile_physics()
     sensors = [a.sensors[-1] for a in env.world.agents]
     assert CompiledCast().cast(env.world, sensors) is None
