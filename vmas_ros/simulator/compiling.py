@@ -190,21 +190,21 @@ class StateFunction:
     otherwise (eager steps, and after a reset or a setter changed the state)
     it runs when first asked for, as a :class:`WorldKernel`. The result is kept
     for the state it was computed from, matched by the identity of
-    ``world.planar_state()``'s tensors, which every change of state replaces.
+    ``world.state.planar_state()``'s tensors, which every change of state replaces.
     """
 
     def __init__(self, world, fn: Callable) -> None:
-        self._world = world
-        self._handle = world.add_state_kernel(fn)
+        self._state = world.state  # its WorldState, asked directly: this runs several times per step
+        self._handle = self._state.add_kernel(fn)
         self._kernel = WorldKernel(world, fn)
         self._last = None  # (q, v, output) of the last state asked for
 
     def __call__(self):
-        q, v = self._world.planar_state()
+        q, v = self._state.planar_state()
         last = self._last
         if last is not None and last[0] is q and last[1] is v:
             return last[2]
-        output = self._world.take_state_kernel_output(self._handle)
+        output = self._state.take_kernel_output(self._handle)
         if output is None:  # an eager step, or the state changed since the step
             output = self._kernel(q, v)
         self._last = (q, v, output)

@@ -6,8 +6,9 @@ message ``c`` for the current step. Setters validate shape and device, so a
 wrong tensor fails where it is written, not deep inside a step.
 
 After a step, pos/vel/rot/ang_vel live in the world's
-:class:`~vmas_ros.simulator.state_store.StateStore`; an entity fetches a
-field from there the first time it is read (see that module for why).
+:class:`~vmas_ros.simulator.world_state.WorldState` (``World.state``); an
+entity fetches a field from there the first time it is read (see that module
+for why), and holds a tensor of its own only for a field set since.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from typing import Dict, List, Optional
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator.state_store import DETACHED, STORED_FIELDS, StateStore
+from vmas_ros.simulator.world_state import DETACHED, STORED_FIELDS, WorldState
 from vmas_ros.simulator.utils import TorchUtils
 
 __all__ = ["EntityState", "AgentState", "Action"]
@@ -79,23 +80,24 @@ def _state_tensor(name: str, width: int, doc: str):
 
 
 def _stored_tensor(name: str, width: int, doc: str):
-    """A [batch, width] field kept in the world's state store after a step (validated like _state_tensor).
+    """A [batch, width] field the world state holds after a step (validated like _state_tensor).
 
-    The entity holds a tensor of its own only when it was set since the
-    store's last step (its generation number equals the store's); otherwise
-    the getter returns the store's view, and keeps no reference to it: an
-    entity holding last step's view would keep last step's stacks alive (a
-    few MB at 30,000 envs). The setter keeps the new tensor on the entity and
-    tells the store that it is no longer the truth.
+    The entity holds a tensor of its own only when it was set since the world
+    state last adopted a state (its generation number equals the world
+    state's); otherwise the getter returns the world state's view, and keeps
+    no reference to it: an entity holding last step's view would keep last
+    step's stacks alive (a few MB at 30,000 envs). The setter keeps the new
+    tensor on the entity and tells the world state that the adopted state is
+    no longer the truth.
     """
     attr, gen_attr = "_" + name, "_" + name + "_gen"
 
     def fget(self):
-        store = self._store
-        if self.__dict__[gen_attr] == store.gen:
+        world_state = self._world_state
+        if self.__dict__[gen_attr] == world_state.generation:
             return self.__dict__[attr]
-        self.__dict__[attr] = None  # a tensor set before the last step: the step consumed it
-        return store.part(name, self._slot)
+        self.__dict__[attr] = None  # a tensor set before the last adopted state: the step consumed it
+        return world_state.view(name, self._slot)
 
     def fset(self, value: Tensor) -> None:
         value = self._check_tensor(self._owner_name, name, value)
@@ -122,51 +124,46 @@ class EntityState(_Batched):
     def __init__(self, owner_name: str = "entity") -> None:
         super().__init__()
         self._owner_name = owner_name
-        #: the world's state store and this entity's row in it (set by World when the entity list changes)
-        self._store: StateStore = DETACHED
+        #: the world state this entity reads through and its row there (see WorldState.set_entities)
+        self._world_state: WorldState = DETACHED
         self._slot = -1
         for name in STORED_FIELDS:
             self.__dict__["_" + name] = None
-            self.__dict__["_" + name + "_gen"] = DETACHED.gen
+            self.__dict__["_" + name + "_gen"] = DETACHED.generation
+
+    # The methods below are the world state's side of the protocol (world_state.py calls them).
 
     def _own(self, name: str, value: Optional[Tensor]) -> None:
-        """Make ``value`` this entity's ``name`` until the next step; the store no longer holds it."""
-        store = self._store
+        """Make ``value`` this entity's ``name`` until the next step; the adopted state no longer holds it."""
+        world_state = self._world_state
         self.__dict__["_" + name] = value
-        self.__dict__["_" + name + "_gen"] = store.gen
-        store.dirty = True
-
-    def _take_from_store(self) -> None:
-        """Own every field the store still holds for this entity (its current views become the entity's)."""
-        gen = self._store.gen
-        for name in STORED_FIELDS:
-            if self.__dict__["_" + name + "_gen"] != gen:
-                self.__dict__["_" + name] = self._store.part(name, self._slot)
-                self.__dict__["_" + name + "_gen"] = gen
+        self.__dict__["_" + name + "_gen"] = world_state.generation
+        world_state.dirty = True
 
     def _set_since_adopt(self, name: str) -> Optional[Tensor]:
-        """The tensor this entity was given for ``name`` since the store's last adopt, or None (it reads the store)."""
-        return self.__dict__["_" + name] if self.__dict__["_" + name + "_gen"] == self._store.gen else None
+        """The tensor this entity was given for ``name`` since the world state last adopted a state, or None
+        (it reads the adopted state)."""
+        return self.__dict__["_" + name] if self.__dict__["_" + name + "_gen"] == self._world_state.generation else None
 
     def _drop_consumed(self) -> None:
-        """Let go of fields set before the store's last step: the step consumed them (they are stale).
+        """Let go of fields set before the world state's last adopted state: the step consumed them (they are stale).
 
         The getter does the same lazily, but a field nobody reads after the
         step would keep its old tensor alive until the next setter (a reset's
         positions would be held through every later step).
         """
-        gen = self._store.gen
+        generation = self._world_state.generation
         for name in STORED_FIELDS:
-            if self.__dict__["_" + name + "_gen"] != gen:
+            if self.__dict__["_" + name + "_gen"] != generation:
                 self.__dict__["_" + name] = None
 
-    def _join(self, store: StateStore, slot: int) -> None:
-        """Read from ``store`` at row ``slot`` from now on (the caller released the previous store)."""
-        self._take_from_store()
+    def _join(self, world_state: WorldState, slot: int) -> None:
+        """Read from ``world_state`` at row ``slot`` from now on (the caller made sure this entity holds every
+        field itself: a new entity does, and ``WorldState.set_entities`` hands the others theirs first)."""
         for name in STORED_FIELDS:
-            self.__dict__["_" + name + "_gen"] = store.gen
-        self._store, self._slot = store, slot
-        store.dirty = True
+            self.__dict__["_" + name + "_gen"] = world_state.generation
+        self._world_state, self._slot = world_state, slot
+        world_state.dirty = True
 
     def _spawn(self, dim_c: int, dim_p: int) -> None:
         zeros = lambda width: torch.zeros(self._batch_dim, width, device=self._device)  # noqa: E731
@@ -182,7 +179,7 @@ class EntityState(_Batched):
 
     def _reset(self, env_index, stored: bool = True) -> None:
         """Zero every field in ``env_index`` (all envs when None); ``stored=False`` leaves pos/vel/rot/ang_vel
-        alone (``World.reset`` zeroes those of all entities at once in its state store)."""
+        alone (``World.reset`` zeroes those of all entities at once in its world state)."""
         for name in self._fields if stored else self._fields[len(STORED_FIELDS):]:
             value = getattr(self, name)
             if value is None:

@@ -143,7 +143,7 @@ class WorldTables:
     limits_torque: bool = True  # some agent with finite max_t or t_range
     #: the physics' constants for these tables (physics.constants.step_constants fills it once)
     step_constants: Optional["StepConstants"] = field(default=None, repr=False, compare=False)
-    #: whether some agent cannot move or turn (ActionInputs fills it once)
+    #: whether some agent cannot move or turn (World._action_input fills it once)
     fixed_agents: Optional[bool] = field(default=None, repr=False, compare=False)
 
 

@@ -1,12 +1,18 @@
-"""The world: owns the entities of a batch of envs and steps them together.
+"""The world: the entities of a batch of envs, the queries about them, and the call of their step.
 
-Public API follows VMAS 1.5's ``World``. Internally a step runs
-:func:`vmas_ros.simulator.physics.pipeline.step` on the planar state of all
-entities, which the world's :class:`~vmas_ros.simulator.state_store.StateStore`
-keeps between steps; entities read their fields from it lazily, and the
-state is rebuilt from the entities only when one of them changed. Property
-tables are cached and rebuilt only when the set of entities or one of their
-physical properties changes.
+Public API follows VMAS 1.5's ``World``. Three things live elsewhere:
+
+- the entities' state: :class:`~vmas_ros.simulator.world_state.WorldState`
+  (``World.state``) holds every entity's pos/vel/rot/ang_vel between steps;
+  entities read and write through it, and the batched reads scenarios use
+  (``stacked_state``, ``planar_state``, ...) are its methods, offered here
+  under VMAS-style names;
+- the physics: a step runs :func:`vmas_ros.simulator.physics.pipeline.advance`
+  on that state, eagerly or compiled;
+- ray casting: :mod:`vmas_ros.simulator.rays`.
+
+Property tables (``tables``) are cached and rebuilt only when the set of
+entities or one of their physical properties changes.
 """
 from __future__ import annotations
 
@@ -16,49 +22,22 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator import geometry as geo
-from vmas_ros.simulator import raycast
-from vmas_ros.simulator import physics
-from vmas_ros.simulator.physics.pipeline import advance
+from vmas_ros.simulator import physics, rays
 from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
-from vmas_ros.simulator.layout import split_xy_stacked, stack_into
+from vmas_ros.simulator.physics.actions import assemble_actions, hold_agents, limit_actions
+from vmas_ros.simulator.physics.pipeline import advance
 from vmas_ros.simulator.shapes import Box, Line, Sphere
-from vmas_ros.simulator.state_store import StateStore
 from vmas_ros.simulator.tables import PAIR_KINDS, WorldTables, build_tables
 from vmas_ros.simulator.utils import (
-    ANGULAR_FRICTION,
-    COLLISION_FORCE,
-    DRAG,
-    JOINT_FORCE,
-    LINE_MIN_DIST,
-    LINEAR_FRICTION,
-    TORQUE_CONSTRAINT_FORCE,
+    ANGULAR_FRICTION, COLLISION_FORCE, DRAG, JOINT_FORCE, LINE_MIN_DIST, LINEAR_FRICTION, TORQUE_CONSTRAINT_FORCE,
 )
-from vmas_ros.simulator.world_actions import ActionInputs
-from vmas_ros.simulator.world_state import StateAccess
-from vmas_ros.simulator.world_rays import RayQueries
+from vmas_ros.simulator.world_state import WorldState
 
 __all__ = ["World"]
 
 #: shape-kind pairs a collision kernel exists for, each sorted by name
 _COLLIDABLE_KINDS = frozenset(tuple(sorted(kinds)) for kinds in PAIR_KINDS)
-
-
-def _stacked_planar(fields: List[List[Optional[Tensor]]], n: int, batch: int, device) -> physics.PlanarState:
-    """The planar state from per-entity fields (pos, rot, vel, ang_vel; per entity the tensor, or None
-    for a zero), each field written straight into its rows (no gradient kept: ``layout.stack_into``)."""
-    present = [t for field in fields for t in field if t is not None]
-    dtype = present[0].dtype if present else torch.get_default_dtype()
-    allocate = torch.empty if len(present) == 4 * n else torch.zeros
-    q, v = (allocate(3, n, batch, device=device, dtype=dtype) for _ in range(2))
-    for rows, field in ((q[:2], fields[0]), (q[2:], fields[1]), (v[:2], fields[2]), (v[2:], fields[3])):
-        present = [i for i, t in enumerate(field) if t is not None]
-        if len(present) == n:
-            stack_into(field, rows)
-        else:
-            for i in present:
-                rows[:, i].copy_(field[i].t())
-    return physics.PlanarState(q, v)
 
 
 def _step_layout(state, tables, params: physics.StepParams, actions, fixed_rotation, kernels) -> tuple:
@@ -69,12 +48,11 @@ def _step_layout(state, tables, params: physics.StepParams, actions, fixed_rotat
             isinstance(actions, tuple), fixed_rotation is None, tuple(id(kernel) for kernel in kernels))
 
 
-#: the eager LIDAR kernels by target shape kind (World.compile_physics swaps in compiled copies)
-#: (spheres: the nearest hit over the targets; boxes and lines: per target)
-_EAGER_RAY_KERNELS = {"sphere": raycast.ray_sphere_nearest_xy, "box": raycast.ray_box_xy, "line": raycast.ray_segment_xy}
+def _no_entity(_: Entity) -> bool:
+    return False
 
 
-class World(RayQueries, ActionInputs, StateAccess):
+class World:
     """A batch of ``batch_dim`` 2D worlds sharing the same entities (VMAS ``World``)."""
 
     def __init__(
@@ -123,23 +101,17 @@ class World(RayQueries, ActionInputs, StateAccess):
         self._landmarks: List[Landmark] = []
         self._joint_constraints: Dict[frozenset, object] = {}
         self._tables: Optional[WorldTables] = None
-        #: every entity's pos/vel/rot/ang_vel after the last step (see state_store.py)
-        self._store = StateStore()
-        #: while the store is dirty: field -> (the entity tensors it was stacked from, their versions, the stack)
-        self._stacks: Dict[str, Tuple[List[Tensor], List[int], Tensor]] = {}
-        self._xy_splits: Dict[str, Tuple[Tensor, Tensor]] = {}  # field -> (stack it was split from, [2, N, B])
+        #: every entity's pos/vel/rot/ang_vel, and everything derived from them (see world_state.py)
+        self._state = WorldState(batch_dim, self._device)
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
         #: the step as one function: advance, or a torch.compile'd copy of it (compile_physics)
         self._physics_step = advance
         self._compile_mode: Optional[str] = None
-        #: pure functions of the new state a step evaluates with its physics (see add_state_kernel)
-        self._state_kernels: List[Callable] = []
-        self._kernel_outputs: Tuple[int, list] = (-1, [])  # (store generation, one output per kernel)
         #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
-        self._ray_kernels = _EAGER_RAY_KERNELS
-        #: (entity id, filter id) -> (tables, filter, targets) of layout-static lidar filters (see ray_targets)
-        self._static_ray_targets: Dict[tuple, tuple] = {}
+        self._ray_kernels = rays.EAGER_KERNELS
+        #: what ray_targets knows of layout-static lidar filters (see rays.ray_targets)
+        self._static_ray_targets: rays.TargetCache = {}
 
     #: How contacts near the broad-phase radius are decided: "batch" (VMAS 1.5
     #: behaviour, bit-for-bit parity) or "env" (each env independent of the others).
@@ -171,13 +143,14 @@ class World(RayQueries, ActionInputs, StateAccess):
         self._compile_mode = mode
         if not enabled:
             self._physics_step = advance
-            self._ray_kernels = _EAGER_RAY_KERNELS
+            self._ray_kernels = rays.EAGER_KERNELS
             return
         # one compiled copy per layout, checking only the state and the actions on each call (LayoutCompiled)
         self._physics_step = LayoutCompiled(advance, mode, key=_step_layout,
                                             checked=("state.", "actions", "fixed_rotation"))
         # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
-        self._ray_kernels = {kind: compile_for_world(fn, mode, arguments_only=True) for kind, fn in _EAGER_RAY_KERNELS.items()}
+        self._ray_kernels = {kind: compile_for_world(fn, mode, arguments_only=True)
+                             for kind, fn in rays.EAGER_KERNELS.items()}
 
     @property
     def physics_compiled(self) -> bool:
@@ -193,21 +166,18 @@ class World(RayQueries, ActionInputs, StateAccess):
         """Only way to add an agent; ``entities`` lists landmarks first, then agents (as VMAS)."""
         self._check_new_name(agent)
         agent._attach(self)
-        self._store.release([e.state for e in self.entities])  # rows move: entities own their state again
         self._agents.append(agent)
         self._entities_changed()
 
     def add_landmark(self, landmark: Landmark) -> None:
         self._check_new_name(landmark)
         landmark._attach(self)
-        self._store.release([e.state for e in self.entities])
         self._landmarks.append(landmark)
         self._entities_changed()
 
     def _entities_changed(self) -> None:
-        """Give every entity its row in the state store and rebuild the tables."""
-        for slot, entity in enumerate(self.entities):
-            entity.state._join(self._store, slot)
+        """Give every entity its row in the world state and rebuild the tables."""
+        self._state.set_entities(self.entities)
         self._invalidate_tables()
 
     def add_joint(self, joint) -> None:
@@ -239,12 +209,10 @@ class World(RayQueries, ActionInputs, StateAccess):
         """Zero every entity's state (and agents' actions) in env ``env_index``, or in all envs when None."""
         entities = self.entities
         if env_index is None and entities:
-            # all envs: the store takes a zero state for every entity's pos/vel/rot/ang_vel (allocated when
+            # all envs: the world state zeroes every entity's pos/vel/rot/ang_vel at once (allocated when
             # read; a rebuild fills only what the scenario set) instead of four fresh tensors per entity
-            self._store.adopt_zeros((3, len(entities), self._batch_dim), self._device)
-            self._stacks, self._xy_splits = {}, {}
+            self._state.reset_all()
             for e in entities:
-                e.state._drop_consumed()
                 e._reset(None, stored=False)
             return
         for e in entities:
@@ -257,13 +225,13 @@ class World(RayQueries, ActionInputs, StateAccess):
     def to(self, device) -> None:
         self._device = torch.device(device)
         self._gravity = self._gravity.to(self._device)
-        self._store.release([e.state for e in self.entities])
-        self._stacks, self._xy_splits = {}, {}
+        self._state.to(self._device)  # every entity owns its fields again, to move them
         for e in self.entities:
             e.to(self._device)
         self._invalidate_tables()
 
     # ---------------------------------------------------------------- properties
+    state = property(lambda self: self._state, doc="every entity's pos/vel/rot/ang_vel (a ``WorldState``)")
     agents = property(lambda self: self._agents)
     landmarks = property(lambda self: self._landmarks)
     batch_dim = property(lambda self: self._batch_dim)
@@ -315,19 +283,9 @@ class World(RayQueries, ActionInputs, StateAccess):
     def step(self) -> None:
         """Advance every env by ``dt``: forces, contacts, joints, integration, messages."""
         tables = self.tables
-        entities = self.entities
-        if not entities:
+        if not self.entities:
             return
-        store = self._store
-        rebuilt = not store.clean()
-        if rebuilt:  # stacked from the entities, or the stack planar_state() built since they last changed
-            state = physics.PlanarState(*self.planar_state())
-        else:
-            state = physics.PlanarState(*store.planar())
-            store.drop_views()
-        # what was stacked from the old state is stale once the step runs: freed before the step's
-        # own tensors are allocated (peak memory)
-        self._stacks, self._xy_splits = {}, {}
+        state, rebuilt = self._state.step_input()
         actions = self._action_input(tables, state.q)
         fixed_rotation = None
         if tables.joints is not None:
@@ -336,47 +294,43 @@ class World(RayQueries, ActionInputs, StateAccess):
         physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
         # state kernels ride along in compiled steps only: eagerly, computing them when they are asked for
         # costs the same calls and keeps the step's own peak memory lower
-        kernels = tuple(self._state_kernels) if self.physics_compiled else ()
+        kernels = self._state.kernels if self.physics_compiled else ()
         if self._physics_step is advance:
             new, outputs = advance(state, tables, params, actions, fixed_rotation, kernels)
         else:  # keyed on the tables object: rebuilt whenever an entity or one of its properties changes
             new, outputs = self._physics_step(tables, state, tables, params, actions, fixed_rotation, kernels)
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
-        store.adopt(new.q, new.v)
-        if rebuilt:  # the entities' own tensors went into this step: drop them (see EntityState._drop_consumed)
-            for entity in entities:
-                entity.state._drop_consumed()
-        self._kernel_outputs = (store.gen, list(outputs))
+        self._state.adopt_step(new, outputs, rebuilt)
         if self._dim_c > 0:
             for agent in self._agents:
                 if not agent.silent and agent.action.c is not None:
                     agent.state._c = agent.action.c
 
-    def _planar_from_entities(self, entities: List[Entity]) -> physics.PlanarState:
-        """The physics state ``[3, N, B]`` (q and v) stacked from the entities' own tensors.
-
-        Without a gradient to keep, each field is stacked straight into its
-        rows of the new state (:func:`_stacked_planar`; the old stack and split
-        also left freed blocks scattered through the heap after every
-        reset). After a reset (a zeroed store) only what was set since is read:
-        the rest is zero.
-        """
-        names = ("pos", "rot", "vel", "ang_vel")
-        keeps_grad = lambda fields: torch.is_grad_enabled() and any(  # noqa: E731
-            t is not None and t.requires_grad for field in fields for t in field)
-        if self._store.zeroed:
-            given = [[e.state._set_since_adopt(name) for e in entities] for name in names]
-            if not keeps_grad(given):
-                return _stacked_planar(given, len(entities), self._batch_dim, self._device)
-        fields = [[getattr(e.state, name) for e in entities] for name in names]
-        if not keeps_grad(fields):
-            return _stacked_planar(fields, len(entities), self._batch_dim, self._device)
-        out = []
-        for linear, angular in (fields[:2], fields[2:]):
-            xy = split_xy_stacked(torch.stack(linear))
-            out.append(torch.cat([xy, torch.stack(angular)[..., 0].unsqueeze(0)]))
-        return physics.PlanarState(*out)
+    def _action_input(self, tables: WorldTables, q: Tensor):
+        """The step's action input ``[3, N, B]`` (:func:`~vmas_ros.simulator.physics.actions.assemble_actions`),
+        or, when the physics is compiled and no agent's action needs clamping or holding, the agents'
+        (forces, torques) lists for the compiled step to assemble in its own graph."""
+        agents = self._agents
+        if tables.n_agents == 0:
+            return q.new_zeros(q.shape)
+        if tables.fixed_agents is None:  # some agent cannot move or turn: its action is ignored there
+            tables.fixed_agents = not all(a.movable and a.rotatable for a in agents)
+        limited = tables.limits_force or tables.limits_torque
+        forces, torques = [a.state._force for a in agents], [a.state._torque for a in agents]
+        if not (limited or tables.fixed_agents):
+            return (forces, torques) if self.physics_compiled else assemble_actions(q, tables, forces, torques)
+        force, torque = torch.stack(forces), torch.stack(torques)
+        if limited:
+            force, torque = limit_actions(force, torque, tables)
+            for agent, f, t in zip(agents, force.unbind(0), torque.unbind(0)):  # seen by scenarios, as in VMAS
+                if agent.movable:
+                    agent.state._force = f
+                if agent.rotatable:
+                    agent.state._torque = t
+        if tables.fixed_agents:
+            force, torque = hold_agents(force, torque, tables)
+        return assemble_actions(q, tables, force, torque)
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""
@@ -388,6 +342,68 @@ class World(RayQueries, ActionInputs, StateAccess):
             else:
                 values.append(torch.full((self._batch_dim, 1), float(value), device=self._device))
         return torch.stack(values)
+
+    # ------------------------------------------------------ batched state (World.state)
+    def stacked_state(self, field: str = "pos") -> Tensor:
+        """``[n_entities, batch, D]``: field ``field`` of every entity, landmarks then agents (agents are the
+        last ``len(agents)`` rows). Read-only; the same object until the state changes
+        (:meth:`WorldState.stacked_state`)."""
+        return self._state.stacked_state(field)
+
+    def stacked_xy(self, field: str = "pos") -> Tuple[Tensor, Tensor]:
+        """``(x, y)``, each ``[n_entities, batch]``: ``"pos"`` or ``"vel"`` of every entity as planar components,
+        for code that works per coordinate (``sqrt(dx * dx + dy * dy)`` over contiguous rows vectorises, a
+        norm over a trailing dim of 2 does not). Read-only (:meth:`WorldState.stacked_xy`)."""
+        return self._state.stacked_xy(field)
+
+    def planar_state(self) -> Tuple[Tensor, Tensor]:
+        """``(q, v)``, each ``[3, n_entities, batch]``: (x, y, angle) and (vx, vy, angular velocity), the physics
+        step's own layout, for scenario kernels that compute from the whole state at once
+        (``compiling.WorldKernel``). Read-only (:meth:`WorldState.planar_state`)."""
+        return self._state.planar_state()
+
+    def set_positions(self, entities: List[Entity], x: Tensor, y: Tensor) -> None:
+        """Place several entities in every env at once, ``x``, ``y`` ``[len(entities), B]``: the same as
+        ``set_pos`` for each, in one write when they are consecutive rows (:meth:`WorldState.set_positions`)."""
+        self._state.set_positions(entities, x, y)
+
+    def add_state_kernel(self, kernel: Callable[[Tensor, Tensor], object]) -> int:
+        """Have every compiled step evaluate ``kernel(q, v)`` on its new planar state, in the step's graph;
+        returns the kernel's handle (:meth:`WorldState.add_kernel`). Eager steps leave it to the caller."""
+        return self._state.add_kernel(kernel)
+
+    def replace_state_kernel(self, handle: int, kernel: Optional[Callable[[Tensor, Tensor], object]]) -> None:
+        """Put ``kernel`` in place of kernel ``handle`` (None: the slot computes nothing), for users whose
+        kernel depends on a layout that changed (a compiled step compiles a new copy)."""
+        self._state.replace_kernel(handle, kernel)
+
+    def take_state_kernel_output(self, handle: int):
+        """The output of kernel ``handle`` on the current state, handed out once; None when the state changed
+        since the step computed it or it was taken already (:meth:`WorldState.take_kernel_output`)."""
+        return self._state.take_kernel_output(handle)
+
+    # ------------------------------------------------------------------ ray casts
+    def cast_ray(self, entity: Entity, angles: Tensor, max_range: float,
+                 entity_filter: Callable[[Entity], bool] = _no_entity) -> Tensor:
+        """Distance [B] along one ray per env from ``entity`` to the nearest filtered entity."""
+        return self.cast_rays(entity, angles.unsqueeze(-1), max_range, entity_filter).squeeze(-1)
+
+    def cast_rays(self, entity: Entity, angles: Tensor, max_range: float,
+                  entity_filter: Callable[[Entity], bool] = _no_entity) -> Tensor:
+        """Distances [B, R] along rays at world ``angles`` [B, R]; ``max_range`` where nothing is hit."""
+        return self.cast_rays_along(entity, torch.cos(angles), torch.sin(angles), max_range, entity_filter)
+
+    def cast_rays_along(self, entity: Entity, cos_a: Tensor, sin_a: Tensor, max_range: float,
+                        entity_filter: Callable[[Entity], bool] = _no_entity) -> Tensor:
+        """:meth:`cast_rays` for rays given by their direction ``(cos, sin)``, each ``[B, R]``, for sensors
+        that know their directions more cheaply (see ``Lidar.ray_directions``)."""
+        targets = self.ray_targets(entity, entity_filter)
+        return rays.cast_rays_along(entity.state.pos, targets, cos_a, sin_a, max_range, self._ray_kernels)
+
+    def ray_targets(self, entity: Entity, entity_filter: Callable[[Entity], bool]) -> List[Entity]:
+        """The entities rays from ``entity`` can hit (``entity_filter`` true, not itself); all must collide
+        with it. A ``layout_static`` filter is asked once per tables (:func:`rays.ray_targets`)."""
+        return rays.ray_targets(self.entities, entity, entity_filter, self.tables, self._static_ray_targets)
 
     # ------------------------------------------------------------------- queries
     def _pick(self, value: Tensor, env_index) -> Tensor:

@@ -7,6 +7,8 @@ every env by ``dt`` and reads like the paper's equations:
   ``StepParams``;
 - ``constants``: per-entity constants as ``[3, N, 1]`` columns, built once
   per layout (``StepConstants``);
+- ``actions``: the agents' actions as the step's ``[3, N, B]`` input, clamped
+  to their limits and zero where an agent is held;
 - ``forces``: action, friction and gravity forces;
 - ``joints``: joint springs and rotation locks;
 - ``collision``: one contact kernel per pair of shape kinds, found through a
@@ -16,7 +18,7 @@ every env by ``dt`` and reads like the paper's equations:
 - ``thresholds``: the sizes at which equivalent code paths switch, with why.
 
 ``World.step`` (:mod:`vmas_ros.simulator.world`) calls the pipeline on the
-state it keeps, eagerly or through ``torch.compile``.
+state its ``WorldState`` holds, eagerly or through ``torch.compile``.
 """
 from vmas_ros.simulator.physics.constants import StepConstants, step_constants
 from vmas_ros.simulator.physics.pipeline import step, step_vectors

@@ -3,19 +3,23 @@
 Agents' dynamics write a force ``[B, 2]`` and a torque ``[B, 1]`` each; the
 step adds them to the entities' rows (landmarks get zeros). At a few envs the
 number of calls matters more than the arithmetic, so the copy is chosen by
-size (:mod:`.thresholds`).
+size (:mod:`.thresholds`). Before that, an agent's action is clamped to its
+limits and zeroed in the coordinates it cannot move or turn in, as VMAS does.
 """
 from __future__ import annotations
+
+from typing import Tuple
 
 import torch
 from torch import Tensor
 
 from vmas_ros.simulator.layout import split_xy_into, stack_into
+from vmas_ros.simulator.physics.forces import clamp_norm
 from vmas_ros.simulator.physics.integrator import differentiable
 from vmas_ros.simulator.physics.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.tables import WorldTables
 
-__all__ = ["assemble_actions"]
+__all__ = ["assemble_actions", "hold_agents", "limit_actions"]
 
 
 def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
@@ -44,3 +48,21 @@ def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
         split_xy_into(forces, rows[:2])
     rows[2].copy_(torques[..., 0])
     return actions
+
+
+def limit_actions(force: Tensor, torque: Tensor, tables: WorldTables) -> Tuple[Tensor, Tensor]:
+    """Agents' action forces ``[A, B, 2]`` and torques ``[A, B, 1]`` clamped to their limits as VMAS clamps
+    them: the norm to ``max_f`` (``max_t``), then each component to ``f_range`` (``t_range``)."""
+    if tables.limits_force:
+        force = clamp_norm(force, tables.agent_max_f)
+        force = torch.maximum(torch.minimum(force, tables.agent_f_range), -tables.agent_f_range)
+    if tables.limits_torque:
+        torque = clamp_norm(torque, tables.agent_max_t)
+        torque = torch.maximum(torch.minimum(torque, tables.agent_t_range), -tables.agent_t_range)
+    return force, torque
+
+
+def hold_agents(force: Tensor, torque: Tensor, tables: WorldTables) -> Tuple[Tensor, Tensor]:
+    """``force`` ``[A, B, 2]`` zeroed for agents that cannot move, ``torque`` ``[A, B, 1]`` for those that
+    cannot turn (VMAS ignores their actions there)."""
+    return (torch.where(tables.agent_movable, force, 0.0), torch.where(tables.agent_rotatable, torque, 0.0))

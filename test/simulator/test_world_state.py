@@ -1,6 +1,6 @@
-"""The world's state store: entities read their state lazily after a step, and every change is seen.
+"""The world state: entities read their state lazily after a step, and every change is seen.
 
-The store replaced eager per-entity write-back (see simulator/state_store.py);
+``World.state`` replaced eager per-entity write-back (see simulator/world_state.py);
 these tests pin the VMAS semantics it must keep: an entity's tensors alias its
 state until the next step, setters and in-place writes are seen by the next
 step and by ``stacked_state``, and adding entities or moving devices loses nothing.
@@ -12,6 +12,7 @@ import torch
 
 import vmas_ros
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
+from vmas_ros.simulator.world_state import WorldState
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
@@ -180,7 +181,7 @@ def test_set_positions_equals_setting_each_entity_and_keeps_the_state_clean(devi
     seen = []
     batched.agents[1].subscribe(type("Watcher", (), {"notify": lambda self, *a, **k: seen.append(k)})())
     batched.set_positions(batched.agents[1:3], x, y)
-    assert batched._store.clean(), "consecutive rows written after a step go straight into the state"
+    assert batched.state.clean(), "consecutive rows written after a step go straight into the state"
     assert seen == [{"batch_index": None}], "observers hear about the move as with set_pos"
     for agent, px, py in zip(single.agents[1:3], x, y):
         agent.set_pos(torch.stack([px, py], -1), batch_index=None)
@@ -242,7 +243,7 @@ def test_a_reset_is_zero_until_set_and_the_next_step_sees_exactly_what_was_set(d
         world.step()
         world.reset(None)
     zeroed = worlds[0]
-    assert zeroed._store.zeroed, "a reset of all envs allocates no state"
+    assert zeroed.state.zeroed, "a reset of all envs allocates no state"
     gen = torch.Generator().manual_seed(1)
     chosen = {"none": [], "some": [0, 2], "all": [0, 1, 2]}[setting]
     for index in chosen:
@@ -259,7 +260,7 @@ def test_a_reset_is_zero_until_set_and_the_next_step_sees_exactly_what_was_set(d
             assert torch.equal(getattr(entity.state, f), want)
     q, v = zeroed.planar_state()
     # with something set, the step's state is built over the zeros without allocating a zero state first
-    assert zeroed._store.zeroed == bool(chosen)
+    assert zeroed.state.zeroed == bool(chosen)
     assert torch.equal(torch.stack([q[0], q[1]], -1), expected["pos"]) and torch.equal(q[2], expected["rot"][..., 0])
     assert torch.equal(torch.stack([v[0], v[1]], -1), expected["vel"]) and torch.equal(v[2], expected["ang_vel"][..., 0])
     for world in worlds:
@@ -280,3 +281,40 @@ def test_a_step_lets_go_of_the_tensors_it_consumed(device):
     world.step()
     assert all(e.state.__dict__["_" + f] is None for e in world.entities for f in ("pos", "vel", "rot", "ang_vel"))
     assert torch.equal(world.agents[0].state.pos, world.stacked_state("pos")[0])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_world_state_is_what_the_world_and_its_entities_read(device):
+    """``World.state`` owns the state: the world's batched reads are its reads, every entity reads its own row
+    of it, and an entity added later gets the row ``World.entities`` gives it."""
+    world = _world(device)
+    assert isinstance(world.state, WorldState)
+    world.step()
+    state = world.state
+    assert world.planar_state()[0] is state.planar_state()[0]
+    assert world.stacked_state("vel") is state.stacked_state("vel")
+    assert torch.equal(world.stacked_xy("pos")[1], state.stacked_xy("pos")[1])
+    for slot, entity in enumerate(world.entities):
+        assert entity.state._world_state is state and entity.state._slot == slot
+        assert torch.equal(entity.state.pos, state.view("pos", slot))
+    world.add_landmark(Landmark(name="late", collide=False))
+    assert [e.state._slot for e in world.entities] == list(range(4)) and world.entities[0].name == "late"
+    assert not state.clean(), "rows moved: the next read rebuilds from the entities"
+    assert torch.equal(state.stacked_state("pos")[1:], torch.stack([a.state.pos for a in world.agents]))
+
+
+def test_state_kernels_are_registered_by_handle_and_replaced_in_place():
+    world = _world("cpu")
+
+    def first(q, v):
+        return q.sum()
+
+    def second(q, v):
+        return v.sum()
+
+    handles = [world.add_state_kernel(first), world.add_state_kernel(second)]
+    assert handles == [0, 1] and world.state.kernels == (first, second)
+    world.replace_state_kernel(0, None)
+    assert world.state.kernels == (None, second)
+    with pytest.raises(ValueError, match="no state kernel 2: handles are 0..1"):
+        world.replace_state_kernel(2, first)
