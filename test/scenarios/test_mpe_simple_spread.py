@@ -9,9 +9,9 @@ import pytest
 import torch
 
 import vmas_ros
-from vmas_ros.scenarios.mpe import simple_spread
+from vmas_ros.simulator.thresholds import FEW_ENVS
 
-BATCH = 2 * simple_spread.FEW_ENVS
+BATCH = 2 * FEW_ENVS
 
 
 @pytest.mark.parametrize("n_agents,obs_agents", [(3, True), (5, True), (1, True), (4, False)])

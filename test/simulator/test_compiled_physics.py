@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import vmas_ros
-from vmas_ros.simulator.physics.thresholds import GEMM_SCATTER_MAX_CELLS
+from vmas_ros.simulator.thresholds import GEMM_SCATTER_MAX_CELLS
 
 STEPS = 8
 

@@ -7,9 +7,10 @@ import pytest
 import torch
 
 import vmas_ros
-from vmas_ros.simulator.env_snapshot import RIDE_ALONG_MAX_ELEMENTS, EnvSnapshot, gather
+from vmas_ros.simulator.env_snapshot import EnvSnapshot, gather
 from vmas_ros.simulator.sensors import CollidesWith, Lidar, world_lidars
-from vmas_ros.simulator.threads import SMALL_BATCH_MAX_ENVS, limit_threads_for_small_batches
+from vmas_ros.simulator.threads import limit_threads_for_small_batches
+from vmas_ros.simulator.thresholds import RIDE_ALONG_MAX_ELEMENTS, SMALL_BATCH_MAX_ENVS
 
 
 def _env(device, num_envs: int = 2, rays: int = 9, entity_filter=CollidesWith, compiled: bool = True):

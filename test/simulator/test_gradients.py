@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from vmas_ros.simulator import physics
-from vmas_ros.simulator.physics.thresholds import SMALL_BATCH_ELEMENTS
+from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 
 DT, DRAG, MASS, STEPS = 0.1, 0.25, 2.0, 3

@@ -20,7 +20,7 @@ from vmas_ros.simulator.physics.constants import _free_span
 from vmas_ros.simulator.physics.integrator import Hold
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 
-BATCH = 4096  # 3 x N x 4096 is above physics.thresholds.SMALL_BATCH_ELEMENTS: the float-mask / block paths
+BATCH = 4096  # 3 x N x 4096 is above thresholds.SMALL_BATCH_ELEMENTS: the float-mask / block paths
 STEPS = 5
 
 

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from vmas_ros import make_env
-from vmas_ros.simulator import lidar_batch, lidars
+from vmas_ros.simulator import lidar_batch, thresholds
 from vmas_ros.simulator.sensors import CollidesWith, Lidar, world_lidars
 
 #: scenarios whose observations read every agent's lidar, and the kwargs that give them one
@@ -45,7 +45,7 @@ def test_scenario_readings_equal_each_lidar_cast_alone(name, num_envs, device):
     env.reset()
     sensors = world_lidars(env.world)
     assert len(sensors) >= len(env.agents) > 1
-    batched = num_envs * sensors[0].n_rays <= lidars.BATCH_BELOW_ELEMENTS
+    batched = num_envs * sensors[0].n_rays <= thresholds.LIDAR_BATCH_MAX_ELEMENTS
     assert batched == (num_envs == 3)
     generator = torch.Generator().manual_seed(0)
     hits = 0

@@ -448,7 +448,7 @@ def test_no_dense_incidence_beyond_the_gemm_cap(device):
     """Worlds with more (entity, pair) cells than a GEMM scatter may use build no dense incidence matrix
     (1,000 spheres once allocated 6 GB of them at the first step); small ones build theirs up front."""
     from vmas_ros.simulator.core import Agent, Sphere, World
-    from vmas_ros.simulator.physics.thresholds import GEMM_SCATTER_MAX_CELLS
+    from vmas_ros.simulator.thresholds import GEMM_SCATTER_MAX_CELLS
 
     def stepped(n):
         world = World(batch_dim=2, device=device)

@@ -5,7 +5,7 @@ positions, angles and velocities, and the ranges of the lidars it shows.
 :class:`EnvSnapshot` chooses how to take it once, when it is built:
 
 * the world compiles its physics and envs x rays is at most
-  :data:`RIDE_ALONG_MAX_ELEMENTS`: the step computes it. Gathering after the
+  :data:`~vmas_ros.simulator.thresholds.RIDE_ALONG_MAX_ELEMENTS`: the step computes it. Gathering after the
   step takes a dozen small tensor calls, a lidar cast and the Python around
   them, which at one env is comparable to the compiled step itself;
   registered as one of the world's state kernels (``World.add_state_kernel``),
@@ -29,11 +29,9 @@ import numpy as np
 import torch
 
 from vmas_ros.simulator.lidar_batch import castable, layout_static, lidar_layout, same_lidar_layout
+from vmas_ros.simulator.thresholds import RIDE_ALONG_MAX_ELEMENTS
 
-__all__ = ["EnvSnapshot", "EnvVector", "gather", "RIDE_ALONG_MAX_ELEMENTS"]
-
-#: up to this many envs x rays a compiled step computes the snapshot (above, one more pass over the batch per step)
-RIDE_ALONG_MAX_ELEMENTS = 4096
+__all__ = ["EnvSnapshot", "EnvVector", "gather"]
 
 
 @dataclass(frozen=True)

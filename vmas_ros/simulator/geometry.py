@@ -26,6 +26,7 @@ from typing import List, Sequence, Tuple, Union
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.thresholds import STACKED_SIDES_MAX_ELEMENTS
 from vmas_ros.simulator.utils import LINE_MIN_DIST
 
 __all__ = [
@@ -268,7 +269,7 @@ def closest_point_on_box_boundary_xy(
     (there ``argmin`` and ``gather`` over big stacks cost more than the extra ops).
     """
     n = max(t.numel() for t in (cx, cy, px, py, torch.as_tensor(rot)))
-    if n <= _STACKED_SIDES_MAX_ELEMENTS:
+    if n <= STACKED_SIDES_MAX_ELEMENTS:
         return _box_boundary_stacked(cx, cy, rot, length, width, px, py)
     return _box_boundary_running(cx, cy, rot, length, width, px, py)
 
@@ -302,8 +303,6 @@ def closest_point_on_box_boundary_in_frame(
     qy = torch.addcmul(qy, to_side, torch.copysign(half_w, ly) - qy)
     return cx + (qx * cos_r - qy * sin_r), cy + (qx * sin_r + qy * cos_r)
 
-#: up to this many points closest_point_on_box_boundary_xy stacks the four sides (measured crossover)
-_STACKED_SIDES_MAX_ELEMENTS = 256
 
 
 def _box_sides(cx: Tensor, cy: Tensor, rot: Tensor, length: Scalar, width: Scalar) -> tuple:

@@ -9,11 +9,11 @@ others read their row. Scenarios, the ROS node and tools all just call
 ``measure()``; how it is cast is decided here and nowhere else:
 
 * the world compiles its physics and envs x rays is at most
-  :data:`COMPILED_BATCH_BELOW_ELEMENTS`: one compiled function of the
+  :data:`~vmas_ros.simulator.thresholds.COMPILED_LIDAR_BATCH_MAX_ELEMENTS`: one compiled function of the
   planar state for the whole batch (``lidar_batch.CompiledCast``; sphere
   targets only). Equal to the lidar alone to float rounding, as every
   compiled path is;
-* envs x rays at most :data:`BATCH_BELOW_ELEMENTS`: one eager batched cast
+* envs x rays at most :data:`~vmas_ros.simulator.thresholds.LIDAR_BATCH_MAX_ELEMENTS`: one eager batched cast
   (``lidar_batch.BatchedLidars``), bit-equal to each lidar cast alone;
 * otherwise, and for lidars that cannot be cast together, each lidar alone
   when it is asked for (``Lidar.cast_alone``): there the cost is memory
@@ -48,14 +48,9 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import torch
 
 from vmas_ros.simulator.lidar_batch import BatchedLidars, CompiledCast
+from vmas_ros.simulator.thresholds import COMPILED_LIDAR_BATCH_MAX_ELEMENTS, LIDAR_BATCH_MAX_ELEMENTS
 
-__all__ = ["LidarCaster", "BATCH_BELOW_ELEMENTS", "COMPILED_BATCH_BELOW_ELEMENTS"]
-
-#: eager worlds cast a layout's lidars together while envs x rays is at most this (faster below, slower above)
-BATCH_BELOW_ELEMENTS = 8192
-#: the same for compiled worlds' one-graph cast (faster below; above, one lidar's temporaries stay in
-#: cache where all lidars' together do not)
-COMPILED_BATCH_BELOW_ELEMENTS = 32768
+__all__ = ["LidarCaster"]
 
 
 def _layout(sensor) -> Tuple[int, float]:
@@ -130,13 +125,13 @@ class LidarCaster:
         """Readings of ``batch`` from one cast, or None: cast the lidar asked for alone."""
         elements = world.batch_dim * batch[0].n_rays
         readings = None
-        if world.physics_compiled and elements <= COMPILED_BATCH_BELOW_ELEMENTS:
+        if world.physics_compiled and elements <= COMPILED_LIDAR_BATCH_MAX_ELEMENTS:
             key = tuple(batch)
             caster = self._compiled.get(key)
             if caster is None:
                 caster = self._compiled[key] = CompiledCast()
             readings = caster.cast(world, batch)
-        if readings is None and len(batch) > 1 and elements <= BATCH_BELOW_ELEMENTS:
+        if readings is None and len(batch) > 1 and elements <= LIDAR_BATCH_MAX_ELEMENTS:
             # gradients are recorded where the caller's grad mode and the state ask for them, as measure() does
             readings = self._batched.cast(world, batch, keep_grad=True)
         return readings

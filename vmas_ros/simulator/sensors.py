@@ -10,6 +10,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator.lidars import LidarCaster
+from vmas_ros.simulator.thresholds import DIRECT_TRIG_MAX_ELEMENTS
 from vmas_ros.simulator.utils import Color
 
 __all__ = ["Sensor", "Lidar", "CollidesWith", "world_lidars"]
@@ -64,8 +65,6 @@ class Sensor(abc.ABC):
         """Move internal tensors to ``device``."""
 
 
-#: Lidar.ray_directions takes cos/sin of every ray directly up to this many envs x rays
-DIRECT_TRIG_MAX_ELEMENTS = 4096
 
 
 class Lidar(Sensor):

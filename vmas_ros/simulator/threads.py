@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["limit_threads_for_small_batches", "SMALL_BATCH_MAX_ENVS"]
+from vmas_ros.simulator.thresholds import SMALL_BATCH_MAX_ENVS
 
-#: batches of at most this many envs step on one intra-op thread
-SMALL_BATCH_MAX_ENVS = 256
+__all__ = ["limit_threads_for_small_batches"]
 
 
 def limit_threads_for_small_batches(num_envs: int) -> int:

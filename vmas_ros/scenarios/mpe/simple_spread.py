@@ -27,15 +27,13 @@ from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.layout import as_pairs, join_xy
 from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.thresholds import FEW_ENVS
 from vmas_ros.simulator.utils import Color
 
 #: name -> default of every kwarg
 DEFAULTS = {"n_agents": 3, "obs_agents": True}
 
 AGENT_RADIUS = 0.15
-#: below this many envs, the reward and observations take the formulation with fewer calls (each
-#: call's fixed cost dominates); from it on, the one with fewer passes over memory
-FEW_ENVS = 64
 
 
 class Scenario(BaseScenario):

@@ -14,8 +14,10 @@ every env by ``dt`` and reads like the paper's equations:
 - ``collision``: one contact kernel per pair of shape kinds, found through a
   table;
 - ``scatter``: adding per-pair forces onto entities;
-- ``integrator``: semi-implicit Euler, and how held entities stay still;
-- ``thresholds``: the sizes at which equivalent code paths switch, with why.
+- ``integrator``: semi-implicit Euler, and how held entities stay still.
+
+The sizes at which equivalent code paths switch are in
+:mod:`vmas_ros.simulator.thresholds`, with the reason for each.
 
 ``World.step`` (:mod:`vmas_ros.simulator.world`) calls the pipeline on the
 state its ``WorldState`` holds, eagerly or through ``torch.compile``.

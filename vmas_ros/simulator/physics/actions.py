@@ -3,7 +3,7 @@
 Agents' dynamics write a force ``[B, 2]`` and a torque ``[B, 1]`` each; the
 step adds them to the entities' rows (landmarks get zeros). At a few envs the
 number of calls matters more than the arithmetic, so the copy is chosen by
-size (:mod:`.thresholds`). Before that, an agent's action is clamped to its
+size (:mod:`vmas_ros.simulator.thresholds`). Before that, an agent's action is clamped to its
 limits and zeroed in the coordinates it cannot move or turn in, as VMAS does.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ from torch import Tensor
 from vmas_ros.simulator.layout import split_xy_into, stack_into
 from vmas_ros.simulator.physics.forces import clamp_norm
 from vmas_ros.simulator.physics.integrator import differentiable
-from vmas_ros.simulator.physics.thresholds import SMALL_BATCH_ELEMENTS
+from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.tables import WorldTables
 
 __all__ = ["assemble_actions", "hold_agents", "limit_actions"]

@@ -17,7 +17,7 @@ from torch import Tensor
 
 from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.masks import zero_like
-from vmas_ros.simulator.physics.thresholds import GEMM_SCATTER_MAX_CELLS
+from vmas_ros.simulator.thresholds import GEMM_SCATTER_MAX_CELLS
 from vmas_ros.simulator.physics.types import StepParams
 from vmas_ros.simulator.tables import WorldTables
 

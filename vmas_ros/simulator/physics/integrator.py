@@ -22,7 +22,7 @@ from torch import Tensor
 from vmas_ros.simulator.geometry import norm_xy
 from vmas_ros.simulator.masks import mask_gt, select
 from vmas_ros.simulator.physics.constants import StepConstants
-from vmas_ros.simulator.physics.thresholds import SMALL_BATCH_ELEMENTS
+from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
 
 __all__ = ["Hold", "differentiable", "hold_method", "integrate", "substep"]
 

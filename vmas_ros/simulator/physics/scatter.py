@@ -1,6 +1,6 @@
 """Adding per-pair forces ``[C, P, B]`` onto the entities' force ``[C, N, B]``.
 
-Three equivalent ways, picked by size (see :mod:`.thresholds`):
+Three equivalent ways, picked by size (see :mod:`vmas_ros.simulator.thresholds`):
 ``index_add_`` in pair order (VMAS's summation order: kernels that compute as
 VMAS does stay bit-identical to it), the same on a transposed view (few envs),
 or one batched GEMM against a dense incidence matrix cached on the pair table
@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator.physics.thresholds import (
+from vmas_ros.simulator.thresholds import (
     GEMM_SCATTER_MAX_CELLS, GEMM_SCATTER_MIN_PAIRS, SCATTER_TRANSPOSE_BELOW,
 )
 

@@ -1,0 +1,73 @@
+"""Sizes at which the simulator switches between equivalent ways of computing.
+
+Every switch here picks between code paths that give the same results (to
+float rounding, or bit for bit where noted); only their speed or memory
+differs. Small batches are dominated by each call's fixed cost, so they take
+the form with fewer calls; large batches are dominated by memory traffic, so
+they take the form with fewer passes over memory. The values were set by
+measuring both sides of each switch with the project's benchmark commands
+(docs/bench/); the reasons are kept here, in one place, so a reader can see
+every size-dependent choice the engine makes.
+"""
+from __future__ import annotations
+
+__all__ = [
+    "SCATTER_TRANSPOSE_BELOW", "GEMM_SCATTER_MAX_CELLS", "GEMM_SCATTER_MIN_PAIRS", "SMALL_BATCH_ELEMENTS",
+    "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
+    "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
+]
+
+# --- physics step ---------------------------------------------------------------------------
+
+#: Below this many envs, pair forces are scattered along dim 0 of a transposed view: CPU
+#: ``index_add_`` along an inner dim pays per index, which dominates when each index moves
+#: only a few envs. Same order, same sums.
+SCATTER_TRANSPOSE_BELOW = 16
+
+#: Pair forces may be scattered with one GEMM against a dense ``[N, P]`` incidence matrix up to
+#: this many (entity, pair) cells; above, the matrix would cost more memory than it saves time.
+GEMM_SCATTER_MAX_CELLS = 1 << 14
+
+#: Eager steps over many envs scatter by GEMM only from this many pairs of one kernel: with
+#: fewer, ``index_add_`` runs level with it and the BLAS kernel is not worth its resident code.
+GEMM_SCATTER_MIN_PAIRS = 8
+
+#: Up to this many state elements, held entities are kept still with one ``torch.where`` (the
+#: per-call cost dominates); above, by copying their rows back or integrating only the free
+#: block (``torch.where`` is slow per element on the CPU). Also where the action input switches
+#: from one strided copy to per-component copies.
+SMALL_BATCH_ELEMENTS = 8192
+
+#: Batches of at most this many envs step on one intra-op thread: waking torch's thread pool
+#: costs more than the work it splits.
+SMALL_BATCH_MAX_ENVS = 256
+
+# --- geometry and sensors -------------------------------------------------------------------
+
+#: Up to this many points, the closest point on a box's boundary is found with the four sides
+#: stacked in one tensor (fewer calls); above, side by side (no stacked temporaries).
+STACKED_SIDES_MAX_ELEMENTS = 256
+
+#: A lidar takes cos/sin of every ray directly up to this many envs x rays (fewer calls); above,
+#: it rotates its fixed ray fan by each env's heading (fewer transcendental evaluations).
+DIRECT_TRIG_MAX_ELEMENTS = 4096
+
+#: Eager worlds cast a layout's lidars together while envs x rays is at most this (one set of
+#: calls for all lidars); above, each lidar alone (its temporaries stay in cache).
+LIDAR_BATCH_MAX_ELEMENTS = 8192
+
+#: The same for compiled worlds' one-graph cast: faster below; above, one lidar's temporaries
+#: stay in cache where all lidars' together do not.
+COMPILED_LIDAR_BATCH_MAX_ELEMENTS = 32768
+
+#: Up to this many envs x rays a compiled step also gathers the env a node publishes (one graph
+#: does it for free); above, it is gathered after the step (riding along would add one more pass
+#: over the whole batch per step).
+RIDE_ALONG_MAX_ELEMENTS = 4096
+
+# --- scenario formulations ------------------------------------------------------------------
+
+#: Below this many envs, a scenario that offers two formulations of its rewards and
+#: observations takes the one with fewer calls (each call's fixed cost dominates); from it on,
+#: the one with fewer passes over memory.
+FEW_ENVS = 64
