@@ -39,7 +39,7 @@ import math
 
 import torch
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.common import continuous_heuristic_kwargs, read_kwargs
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -248,9 +248,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("balance heuristic: only continuous actions are supported")
-        config = heuristic_kwargs("balance", DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs("balance", DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         self.n_agents = config["n_agents"]
         self.package_mass = float(config["package_mass"])

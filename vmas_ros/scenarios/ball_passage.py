@@ -43,7 +43,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import configure, continuous_heuristic_kwargs, selected_rows
 from vmas_ros.scenarios.passage import random_permutations
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
@@ -95,11 +95,7 @@ class Scenario(BaseScenario):
     fresh_observations = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        self.n_passages = config["n_passages"]
-        self.fixed_passage = config["fixed_passage"]
-        self.random_start_angle = config["random_start_angle"]
+        configure(self, kwargs, DEFAULTS, validate)
         self.visualize_semidims = False  # extra_render draws the walls
 
         world = World(batch_dim, device, x_semidim=SEMIDIM, y_semidim=SEMIDIM, drag=0.0, linear_friction=0.0)
@@ -293,9 +289,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("ball_passage heuristic: only continuous actions are supported")
-        config = heuristic_kwargs("ball_passage", DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs("ball_passage", DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         self.n_passages = config["n_passages"]
 

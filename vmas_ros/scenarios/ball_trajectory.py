@@ -44,7 +44,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import continuous_heuristic_kwargs, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.joints import Joint
@@ -199,9 +199,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("ball_trajectory heuristic: only continuous actions are supported")
-        validate(heuristic_kwargs("ball_trajectory", DEFAULTS, scenario_kwargs))
+        validate(continuous_heuristic_kwargs("ball_trajectory", DEFAULTS, scenario_kwargs, continuous_action))
 
     def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
         if observation.shape[1] != 8:

@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import continuous_heuristic_kwargs, read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -211,9 +211,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("buzz_wire heuristic: only continuous actions are supported")
-        config = heuristic_kwargs("buzz_wire", DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs("buzz_wire", DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         speed = config["max_speed_1"]
         self.pace = self.climb_speed if speed is None else min(self.climb_speed, 0.8 * speed)

@@ -1,8 +1,14 @@
 """Helpers every scenario shares.
 
 Kwargs: :func:`read_kwargs` (a scenario's kwargs with their defaults; unknown
-ones warn, as in VMAS) and :func:`heuristic_kwargs` (the same kwargs handed to
-a heuristic, where an unknown one is a mistake and raises).
+ones warn, as in VMAS), :func:`configure` (read, check and keep them as the
+scenario's attributes) and :func:`heuristic_kwargs` (the same kwargs handed to
+a heuristic, where an unknown one is a mistake and raises;
+:func:`continuous_heuristic_kwargs` for a heuristic that drives continuous
+actions only).
+
+Checks: :func:`check_number`, :func:`check_int` and :func:`check_flag` raise
+ValueError naming the scenario, the kwarg, what was expected and what came.
 
 Resets: how many envs a reset selects, values drawn for them shaped the way
 ``Entity.set_*(..., batch_index=...)`` takes them, and spawn points kept
@@ -24,7 +30,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from numbers import Real
+from typing import Any, Callable, Optional
 
 import torch
 from torch import Tensor
@@ -32,7 +39,7 @@ from torch import Tensor
 from vmas_ros.simulator.utils import Color, ScenarioUtils, selected_env_count
 
 __all__ = [
-    "for_index", "greedy_first_match", "heuristic_kwargs", "pair_distances", "range_links", "read_kwargs",
+    "check_flag", "check_int", "check_number", "configure", "continuous_heuristic_kwargs", "for_index", "greedy_first_match", "heuristic_kwargs", "pair_distances", "range_links", "read_kwargs",
     "sample_clear_positions", "selected_rows", "uniform_rows",
 ]
 
@@ -49,6 +56,44 @@ def read_kwargs(kwargs: dict, defaults: Mapping[str, Any]) -> dict:
     return config
 
 
+def check_number(scenario: str, name: str, value, minimum: Optional[float] = 0.0, strict: bool = False) -> float:
+    """``value`` as a float if it is a finite real number (not a bool) and ``>= minimum``
+    (``>`` with ``strict``; any finite number with ``minimum=None``), else ValueError naming it."""
+    ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+    if ok and minimum is not None:
+        ok = value > minimum if strict else value >= minimum
+    if not ok:
+        bound = "" if minimum is None else f" {'>' if strict else '>='} {minimum:g}"
+        raise ValueError(f"{scenario}: {name} must be a finite number{bound}, got {value!r}")
+    return float(value)
+
+
+def check_int(scenario: str, name: str, value, minimum: int = 1, unit: str = "") -> int:
+    """``value`` if it is an int (not a bool) ``>= minimum``, else ValueError naming it and, when
+    given, its ``unit`` (e.g. ``"steps"``)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        what = f" ({unit})" if unit else ""
+        raise ValueError(f"{scenario}: {name} must be an int >= {minimum}{what}, got {value!r}")
+    return value
+
+
+def check_flag(scenario: str, name: str, value) -> bool:
+    """``value`` if it is True or False, else ValueError naming it."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{scenario}: {name} must be True or False, got {value!r}")
+    return value
+
+
+def configure(scenario, kwargs: dict, defaults: Mapping[str, Any], validate: Callable[[dict], None]) -> dict:
+    """:func:`read_kwargs`, check them with ``validate`` (it raises on a bad value) and set each
+    on ``scenario`` as an attribute of the same name. Returns the kwargs read."""
+    config = read_kwargs(kwargs, defaults)
+    validate(config)
+    for name, value in config.items():
+        setattr(scenario, name, value)
+    return config
+
+
 def heuristic_kwargs(scenario: str, defaults: Mapping[str, Any], scenario_kwargs: Mapping[str, Any]) -> dict:
     """The scenario kwargs a heuristic was given, completed with ``defaults``.
 
@@ -59,6 +104,15 @@ def heuristic_kwargs(scenario: str, defaults: Mapping[str, Any], scenario_kwargs
     if unknown:
         raise TypeError(f"{scenario} HeuristicPolicy got unknown kwargs {sorted(unknown)}")
     return {**defaults, **scenario_kwargs}
+
+
+def continuous_heuristic_kwargs(scenario: str, defaults: Mapping[str, Any], scenario_kwargs: Mapping[str, Any],
+                                continuous_action: bool) -> dict:
+    """:func:`heuristic_kwargs` for a heuristic that computes forces and so drives continuous
+    actions only: asked for discrete ones, it raises ValueError."""
+    if not continuous_action:
+        raise ValueError(f"{scenario} heuristic: only continuous actions are supported")
+    return heuristic_kwargs(scenario, defaults, scenario_kwargs)
 
 
 def selected_rows(batch_dim: int, env_index) -> int:

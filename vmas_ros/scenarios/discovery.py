@@ -51,7 +51,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import (
-    for_index, pair_distances, range_links, read_kwargs, sample_clear_positions, selected_rows,
+    configure, for_index, pair_distances, range_links, sample_clear_positions, selected_rows,
 )
 from vmas_ros.simulator.masks import mask_ge, mask_lt
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
@@ -91,10 +91,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        _validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, _validate)
         self.viewer_zoom = 1
 
         world = World(

@@ -69,9 +69,9 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs
+from vmas_ros.scenarios.common import check_flag, heuristic_kwargs
 from vmas_ros.scenarios.joint_passage_common import (
-    AGENT_RADIUS, N_BLOCKS, JointPassageBase, JointPassageHeuristic, check_flag, line_angle_gap, validate_common,
+    AGENT_RADIUS, N_BLOCKS, JointPassageBase, JointPassageHeuristic, line_angle_gap, validate_common,
 )
 from vmas_ros.simulator.core import Agent, Sphere
 from vmas_ros.simulator.utils import Color
@@ -93,7 +93,7 @@ MIDDLE = N_BLOCKS // 2  # the block the gaps gather around
 def validate(config: dict) -> None:
     validate_common(NAME, config)
     for name in ("all_passed_rot", "use_controller"):
-        check_flag(NAME, config, name)
+        check_flag(NAME, name, config[name])
     n = config["n_passages"]
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PASSAGES:
         raise ValueError(f"{NAME}: n_passages must be an int in [1, {MAX_PASSAGES}], got {n!r}")

@@ -26,8 +26,8 @@ import math
 import torch
 from torch import Tensor
 
+from vmas_ros.scenarios.common import check_flag, check_number, read_kwargs, selected_rows
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import read_kwargs, selected_rows
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -76,40 +76,24 @@ def slot_positions(slots: Tensor) -> Tensor:
     return torch.stack([x, torch.zeros_like(x)], dim=-1)
 
 
-def check_number(scenario: str, config: dict, name: str, low: float = None, strict: bool = False) -> None:
-    """Raise ValueError unless ``config[name]`` is a real number (>= or > ``low``)."""
-    value = config[name]
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if ok and low is not None:
-        ok = value > low if strict else value >= low
-    if not ok:
-        bound = "" if low is None else f" {'>' if strict else '>='} {low}"
-        raise ValueError(f"{scenario}: {name} must be a number{bound}, got {value!r}")
-
-
-def check_flag(scenario: str, config: dict, name: str) -> None:  # noqa: D103
-    if not isinstance(config[name], bool):
-        raise ValueError(f"{scenario}: {name} must be True or False, got {config[name]!r}")
-
-
 def validate_common(scenario: str, config: dict) -> None:
     """The checks of the kwargs both scenarios take."""
     flags = ("random_start_angle", "random_goal_angle", "observe_joint_angle", "asym_package", "fixed_passage")
     for name in flags:
-        check_flag(scenario, config, name)
-    check_number(scenario, config, "joint_length", 2 * AGENT_RADIUS, strict=True)
+        check_flag(scenario, name, config[name])
+    check_number(scenario, "joint_length", config["joint_length"], 2 * AGENT_RADIUS, strict=True)
     if config["joint_length"] > 1.0:
         raise ValueError(f"{scenario}: joint_length must be at most 1 (the rod must fit the arena), got {config['joint_length']!r}")
-    check_number(scenario, config, "mass_ratio", 0.0, strict=True)
-    check_number(scenario, config, "mass_position")
+    check_number(scenario, "mass_ratio", config["mass_ratio"], 0.0, strict=True)
+    check_number(scenario, "mass_position", config["mass_position"], None)
     if not -1 <= config["mass_position"] <= 1:
         raise ValueError(f"{scenario}: mass_position must be in [-1, 1] (rod half-lengths), got {config['mass_position']!r}")
     for name in ("pos_shaping_factor", "rot_shaping_factor", "collision_reward", "energy_reward_coeff"):
-        check_number(scenario, config, name)
+        check_number(scenario, name, config[name], None)
     for name in ("obs_noise", "joint_angle_obs_noise"):
-        check_number(scenario, config, name, 0.0)
+        check_number(scenario, name, config[name], 0.0)
     if config["max_speed_1"] is not None:
-        check_number(scenario, config, "max_speed_1", 0.0, strict=True)
+        check_number(scenario, "max_speed_1", config["max_speed_1"], 0.0, strict=True)
     if config["joint_angle_obs_noise"] and not config["observe_joint_angle"]:
         raise ValueError(
             f"{scenario}: joint_angle_obs_noise={config['joint_angle_obs_noise']!r} needs observe_joint_angle=True"

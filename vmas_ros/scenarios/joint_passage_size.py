@@ -68,9 +68,9 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs
+from vmas_ros.scenarios.common import check_flag, heuristic_kwargs
 from vmas_ros.scenarios.joint_passage_common import (
-    AGENT_RADIUS, N_BLOCKS, JointPassageBase, JointPassageHeuristic, check_flag, heading_gap, line_angle_gap,
+    AGENT_RADIUS, N_BLOCKS, JointPassageBase, JointPassageHeuristic, heading_gap, line_angle_gap,
     slot_positions, validate_common,
 )
 from vmas_ros.simulator.core import Agent, Sphere
@@ -93,7 +93,7 @@ SMALL_OFFSET = 3  # slots from the big gap's left block to the small gap
 def validate(config: dict) -> None:
     validate_common(NAME, config)
     for name in ("middle_angle_180", "use_vel_controller"):
-        check_flag(NAME, config, name)
+        check_flag(NAME, name, config[name])
     if config["n_passages"] not in (3, 4) or isinstance(config["n_passages"], bool):
         raise ValueError(f"{NAME}: n_passages must be 3 or 4, got {config['n_passages']!r}")
 

@@ -60,7 +60,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, range_links, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import configure, heuristic_kwargs, range_links, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -152,10 +152,7 @@ class Scenario(BaseScenario):
     fresh_observations = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         self.plot_grid = False
         self.spawn_distance = 2 * self.agent_radius + SPAWN_CLEARANCE
         bounds = (self.world_spawning_x, self.world_spawning_y) if self.enforce_bounds else (None, None)

@@ -1,6 +1,5 @@
 """Pieces shared by the package-pushing tasks (``transport``, ``reverse_transport``).
 
-* kwargs: ``check_count`` and ``check_positive`` (ValueError naming the value);
 * env selectors: ``place`` (write per-env draws with ``set_pos``, whatever the
   selector; ``vmas_ros.scenarios.common`` counts the selected envs);
 * spawning: ``spawn_apart``, batched rejection sampling of positions kept a
@@ -15,9 +14,7 @@ of its draws are clear.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
-from numbers import Real
 
 import torch
 from torch import Tensor
@@ -29,21 +26,6 @@ from vmas_ros.simulator.utils import Color
 EnvIndex = None | int | Tensor
 #: rejection-sampling rounds after which ``spawn_apart`` gives up
 MAX_SPAWN_ROUNDS = 10_000
-
-
-# ------------------------------------------------------------------------ kwargs
-def check_count(scenario: str, name: str, value) -> int:
-    """``value`` if it is an int >= 1 (not a bool), else ValueError naming it."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{scenario}: {name} must be an int >= 1, got {value!r}")
-    return value
-
-
-def check_positive(scenario: str, name: str, value) -> float:
-    """``value`` as a float if it is a finite number > 0 (not a bool), else ValueError naming it."""
-    if isinstance(value, bool) or not isinstance(value, Real) or not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{scenario}: {name} must be a finite number > 0, got {value!r}")
-    return float(value)
 
 
 # ------------------------------------------------------------------ env selectors

@@ -38,7 +38,7 @@ import math
 import torch
 
 from vmas_ros.scenarios import packages as pk
-from vmas_ros.scenarios.common import read_kwargs, selected_rows
+from vmas_ros.scenarios.common import check_int, check_number, read_kwargs, selected_rows
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -62,10 +62,10 @@ class Scenario(BaseScenario):
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         options = read_kwargs(kwargs, DEFAULTS)
-        self.n_agents = pk.check_count(NAME, "n_agents", options["n_agents"])
-        self.package_width = pk.check_positive(NAME, "package_width", options["package_width"])
-        self.package_length = pk.check_positive(NAME, "package_length", options["package_length"])
-        self.package_mass = pk.check_positive(NAME, "package_mass", options["package_mass"])
+        self.n_agents = check_int(NAME, "n_agents", options["n_agents"])
+        self.package_width = check_number(NAME, "package_width", options["package_width"], 0.0, strict=True)
+        self.package_length = check_number(NAME, "package_length", options["package_length"], 0.0, strict=True)
+        self.package_mass = check_number(NAME, "package_mass", options["package_mass"], 0.0, strict=True)
         if min(self.package_length, self.package_width) <= 4 * AGENT_RADIUS:
             raise ValueError(
                 f"{NAME}: the box must be wider than two agents ({4 * AGENT_RADIUS}) on both sides, "

@@ -56,7 +56,9 @@ from numbers import Real
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, range_links, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import (
+    continuous_heuristic_kwargs, for_index, range_links, read_kwargs, selected_rows,
+)
 from vmas_ros.simulator.core import Agent, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -304,9 +306,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("sampling heuristic: only continuous actions are supported")
-        config = heuristic_kwargs("sampling", DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs("sampling", DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         self.lidar_rays = N_LIDAR_RAYS if config["collisions"] else 0
         self.lidar_range = config["lidar_range"]

@@ -35,7 +35,7 @@ import math
 import torch
 
 from vmas_ros.scenarios import packages as pk
-from vmas_ros.scenarios.common import read_kwargs, selected_rows
+from vmas_ros.scenarios.common import check_int, check_number, read_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.layout import cat_columns, join_xy
@@ -63,11 +63,11 @@ class Scenario(BaseScenario):
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         options = read_kwargs(kwargs, DEFAULTS)
-        self.n_agents = pk.check_count(NAME, "n_agents", options["n_agents"])
-        self.n_packages = pk.check_count(NAME, "n_packages", options["n_packages"])
-        self.package_width = pk.check_positive(NAME, "package_width", options["package_width"])
-        self.package_length = pk.check_positive(NAME, "package_length", options["package_length"])
-        self.package_mass = pk.check_positive(NAME, "package_mass", options["package_mass"])
+        self.n_agents = check_int(NAME, "n_agents", options["n_agents"])
+        self.n_packages = check_int(NAME, "n_packages", options["n_packages"])
+        self.package_width = check_number(NAME, "package_width", options["package_width"], 0.0, strict=True)
+        self.package_length = check_number(NAME, "package_length", options["package_length"], 0.0, strict=True)
+        self.package_mass = check_number(NAME, "package_mass", options["package_mass"], 0.0, strict=True)
 
         wall = SPAWN_HALF_SIDE + 2 * AGENT_RADIUS + max(self.package_length, self.package_width)
         world = World(batch_dim, device, x_semidim=wall, y_semidim=wall)
@@ -230,8 +230,8 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         package_length: float = DEFAULTS["package_length"],
     ) -> None:
         super().__init__(continuous_action)
-        self.half_length = pk.check_positive(NAME, "package_length", package_length) / 2
-        self.half_width = pk.check_positive(NAME, "package_width", package_width) / 2
+        self.half_length = check_number(NAME, "package_length", package_length, 0.0, strict=True) / 2
+        self.half_width = check_number(NAME, "package_width", package_width, 0.0, strict=True) / 2
         reach = math.hypot(self.half_length, self.half_width) + AGENT_RADIUS
         self.orbit_radius = reach / math.cos(self.orbit_step / 2) + self.clearance
 

@@ -32,7 +32,7 @@ import math
 
 import torch
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.common import continuous_heuristic_kwargs, read_kwargs
 from vmas_ros.scenarios.common import uniform_rows as uniform_for
 from vmas_ros.simulator.core import Agent, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -153,9 +153,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("wheel heuristic: only continuous actions are supported")
-        config = heuristic_kwargs("wheel", DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs("wheel", DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         self.n_agents = config["n_agents"]
         self.half = config["line_length"] / 2

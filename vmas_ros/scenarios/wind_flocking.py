@@ -59,7 +59,7 @@ from numbers import Real
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import continuous_heuristic_kwargs, for_index, read_kwargs, selected_rows
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -323,9 +323,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("wind_flocking heuristic: only continuous actions are supported")
-        config = validate(heuristic_kwargs("wind_flocking", DEFAULTS, scenario_kwargs))
+        config = validate(continuous_heuristic_kwargs("wind_flocking", DEFAULTS, scenario_kwargs, continuous_action))
         self.desired = float(config["desired_vel"])
         self.v_range = float(config["v_range"])
         self.wind = float(config["wind"])

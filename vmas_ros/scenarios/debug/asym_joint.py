@@ -46,8 +46,9 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, read_kwargs, selected_rows
-from vmas_ros.scenarios.debug.trajectory import check_number
+from vmas_ros.scenarios.common import (
+    check_number, configure, continuous_heuristic_kwargs, for_index, selected_rows,
+)
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.joints import Joint
@@ -100,10 +101,7 @@ class Scenario(BaseScenario):
     fresh_observations = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         package = self.asym_package
         world = World(
             batch_dim, device, substeps=10 if package else 7, joint_force=900 if package else 400,
@@ -218,9 +216,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("asym_joint heuristic: only continuous actions are supported")
-        config = heuristic_kwargs(NAME, DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs(NAME, DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         self.observe_joint_angle = config["observe_joint_angle"]
         self.dead_band = self.dead_band_observed if self.observe_joint_angle else self.dead_band_estimated

@@ -34,9 +34,9 @@ from typing import Tuple
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, uniform_rows
+from vmas_ros.scenarios.common import check_int, check_number, configure, heuristic_kwargs, uniform_rows
 from vmas_ros.scenarios.debug.trajectory import (
-    CommandFilter, PathFollower, check_number, check_steps, noisy_concat, tracking_reward,
+    CommandFilter, PathFollower, noisy_concat, tracking_reward,
 )
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Sphere, World
@@ -60,7 +60,7 @@ def validate(config: dict) -> None:
         check_number(NAME, name, config[name], strict=True)
     for name in ("obs_noise", "min_input_norm", "linear_friction"):
         check_number(NAME, name, config[name])
-    check_steps(NAME, "dt_delay", config["dt_delay"])
+    check_int(NAME, "dt_delay", config["dt_delay"], 0, "steps")
 
 
 def closest_on_circle(pos: Tensor) -> Tensor:
@@ -82,10 +82,7 @@ class Scenario(BaseScenario):
     fresh_observations = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         self.viewer_zoom = 2
         world = World(batch_dim, device, dt=0.05, drag=0.0, linear_friction=self.linear_friction)
         self.agent = Agent(

@@ -36,7 +36,7 @@ from typing import Sequence, Tuple
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.common import check_int, continuous_heuristic_kwargs, read_kwargs
 from vmas_ros.simulator.core import Agent, World
 from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation
@@ -51,11 +51,6 @@ HOLO_MULTIPLIER = [1, 1, 0.001]
 SPAWN_HALF_WIDTH = 1.0
 SPAWN_MIN_DIST = 0.1
 
-
-def check_n_agents(scenario: str, n_agents) -> None:
-    """Raise ValueError unless ``n_agents`` is an int >= 1."""
-    if isinstance(n_agents, bool) or not isinstance(n_agents, int) or n_agents < 1:
-        raise ValueError(f"{scenario}: n_agents must be an int >= 1, got {n_agents!r}")
 
 
 class SpawnScenario(BaseScenario):
@@ -91,7 +86,7 @@ class SpawnScenario(BaseScenario):
 class Scenario(SpawnScenario):
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         config = read_kwargs(kwargs, DEFAULTS)
-        check_n_agents("diff_drive", config["n_agents"])
+        check_int("diff_drive", "n_agents", config["n_agents"])
         self.n_agents = config["n_agents"]
         self.plot_grid = True
 
@@ -174,10 +169,8 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("diff_drive heuristic: only continuous actions are supported")
-        config = heuristic_kwargs("diff_drive", DEFAULTS, scenario_kwargs)
-        check_n_agents("diff_drive", config["n_agents"])
+        config = continuous_heuristic_kwargs("diff_drive", DEFAULTS, scenario_kwargs, continuous_action)
+        check_int("diff_drive", "n_agents", config["n_agents"])
 
     def compute_action(self, observation: Tensor, u_range: Sequence[float]) -> Tensor:
         if len(u_range) == 3:

@@ -37,8 +37,8 @@ from typing import Dict
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
-from vmas_ros.scenarios.debug.diff_drive import SUBSTEPS, SpawnScenario, check_n_agents
+from vmas_ros.scenarios.common import check_int, continuous_heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.debug.diff_drive import SUBSTEPS, SpawnScenario
 from vmas_ros.simulator.core import Agent, World
 from vmas_ros.simulator.dynamics.drone import Drone
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -54,7 +54,7 @@ INERTIA_XY = 8.1e-3
 class Scenario(SpawnScenario):
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
         config = read_kwargs(kwargs, DEFAULTS)
-        check_n_agents("drone", config["n_agents"])
+        check_int("drone", "n_agents", config["n_agents"])
         self.n_agents = config["n_agents"]
         self.plot_grid = True
 
@@ -120,10 +120,8 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("drone heuristic: only continuous actions are supported")
-        self.n_agents = heuristic_kwargs("drone", DEFAULTS, scenario_kwargs)["n_agents"]
-        check_n_agents("drone", self.n_agents)
+        self.n_agents = continuous_heuristic_kwargs("drone", DEFAULTS, scenario_kwargs, continuous_action)["n_agents"]
+        check_int("drone", "n_agents", self.n_agents)
         self._last_tilt: Dict[int, Tensor] = {}  # call slot (agent) -> its last tilt estimate [B, 2]
         self._calls = 0
 

@@ -37,8 +37,10 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, read_kwargs, selected_rows
-from vmas_ros.scenarios.debug.trajectory import CommandFilter, check_number, check_steps, noisy_concat
+from vmas_ros.scenarios.common import (
+    check_int, check_number, configure, continuous_heuristic_kwargs, for_index, selected_rows,
+)
+from vmas_ros.scenarios.debug.trajectory import CommandFilter, noisy_concat
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -64,7 +66,7 @@ def validate(config: dict) -> None:
     for name in ("obs_noise", "min_input_norm", "linear_friction", "pos_shaping_factor", "energy_rew_coeff"):
         check_number(NAME, name, config[name])
     check_number(NAME, "time_rew_coeff", config["time_rew_coeff"], minimum=-math.inf)
-    check_steps(NAME, "dt_delay", config["dt_delay"])
+    check_int(NAME, "dt_delay", config["dt_delay"], 0, "steps")
 
 
 def lab_points(world, env_index) -> Tensor:
@@ -79,10 +81,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         self.viewer_size = (1600, 700)
         self.viewer_zoom = 2
         self.plot_grid = True
@@ -157,9 +156,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("goal heuristic: only continuous actions are supported")
-        config = heuristic_kwargs(NAME, DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs(NAME, DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         #: the slowest command that passes the scenario's dead band
         self.min_speed = config["min_input_norm"] * 1.05

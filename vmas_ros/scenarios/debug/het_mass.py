@@ -38,7 +38,7 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows, uniform_rows
+from vmas_ros.scenarios.common import configure, heuristic_kwargs, selected_rows, uniform_rows
 from vmas_ros.simulator.core import Agent, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -67,10 +67,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         self.plot_grid = True
 
         world = World(batch_dim, device)

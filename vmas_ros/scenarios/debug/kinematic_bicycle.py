@@ -36,9 +36,9 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.common import check_int, continuous_heuristic_kwargs, read_kwargs
 from vmas_ros.scenarios.debug.diff_drive import (
-    HOLO_MULTIPLIER, SUBSTEPS, TASK_SCORE, SpawnScenario, check_n_agents, holonomic_home, steer_home, task_score,
+    HOLO_MULTIPLIER, SUBSTEPS, TASK_SCORE, SpawnScenario, holonomic_home, steer_home, task_score,
 )
 from vmas_ros.simulator.core import Agent, Box, World
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation
@@ -55,7 +55,7 @@ __all__ = ["HeuristicPolicy", "Scenario", "TASK_SCORE", "task_score"]  # the tas
 
 def validate(config: dict) -> dict:
     """The config with numbers as floats; raise ValueError for a value the robot cannot be built with."""
-    check_n_agents("kinematic_bicycle", config["n_agents"])
+    check_int("kinematic_bicycle", "n_agents", config["n_agents"])
     out = dict(config)
     for name, value in config.items():
         if name == "n_agents":
@@ -119,9 +119,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("kinematic_bicycle heuristic: only continuous actions are supported")
-        validate(heuristic_kwargs("kinematic_bicycle", DEFAULTS, scenario_kwargs))
+        validate(continuous_heuristic_kwargs("kinematic_bicycle", DEFAULTS, scenario_kwargs, continuous_action))
 
     def compute_action(self, observation: Tensor, u_range: Sequence[float]) -> Tensor:
         if len(u_range) == 3:

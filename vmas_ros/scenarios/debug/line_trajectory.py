@@ -30,8 +30,8 @@ from typing import Tuple
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, read_kwargs, selected_rows
-from vmas_ros.scenarios.debug.trajectory import PathFollower, check_number, noisy_concat, tracking_reward
+from vmas_ros.scenarios.common import check_number, configure, for_index, heuristic_kwargs, selected_rows
+from vmas_ros.scenarios.debug.trajectory import PathFollower, noisy_concat, tracking_reward
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Sphere, World
 from vmas_ros.simulator.scenario import BaseScenario
@@ -59,9 +59,7 @@ class Scenario(BaseScenario):
     fresh_observations = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        self.obs_noise = config["obs_noise"]
+        configure(self, kwargs, DEFAULTS, validate)
         world = World(batch_dim, device, drag=0.1)
         self.agent = Agent(
             name="agent_0", shape=Sphere(AGENT_RADIUS), mass=2, f_range=0.5, u_range=1, render_action=True,

@@ -31,7 +31,7 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs
+from vmas_ros.scenarios.common import configure, continuous_heuristic_kwargs
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.scenario import BaseScenario
@@ -64,10 +64,7 @@ class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         world = World(
             batch_dim, device, dt=0.1, drag=0.25, substeps=5, collision_force=500,
             x_semidim=SEMIDIM, y_semidim=SEMIDIM,
@@ -137,9 +134,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("pollock heuristic: only continuous actions are supported")
-        config = heuristic_kwargs(NAME, DEFAULTS, scenario_kwargs)
+        config = continuous_heuristic_kwargs(NAME, DEFAULTS, scenario_kwargs, continuous_action)
         validate(config)
         self.lidar = config["lidar"]
         angles = torch.arange(N_RAYS, dtype=torch.float32) * (2 * math.pi / N_RAYS)

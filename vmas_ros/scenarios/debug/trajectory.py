@@ -21,22 +21,7 @@ from torch import Tensor
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.utils import TorchUtils
 
-__all__ = ["CommandFilter", "PathFollower", "check_number", "check_steps", "noisy_concat", "tracking_reward"]
-
-
-def check_number(scenario: str, name: str, value, minimum: float = 0.0, strict: bool = False) -> None:
-    """Raise ValueError unless ``value`` is a real number >= ``minimum`` (> with ``strict``)."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    ok = ok and (value > minimum if strict else value >= minimum)
-    if not ok:
-        relation = ">" if strict else ">="
-        raise ValueError(f"{scenario}: {name} must be a number {relation} {minimum}, got {value!r}")
-
-
-def check_steps(scenario: str, name: str, value) -> None:
-    """Raise ValueError unless ``value`` is an int >= 0 (a number of steps)."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ValueError(f"{scenario}: {name} must be an int >= 0 (steps), got {value!r}")
+__all__ = ["CommandFilter", "PathFollower", "noisy_concat", "tracking_reward"]
 
 
 def noisy_concat(parts: Sequence[Tensor], noise: float) -> Tensor:

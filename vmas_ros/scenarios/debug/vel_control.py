@@ -42,7 +42,7 @@ from typing import Dict
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import for_index, heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import configure, continuous_heuristic_kwargs, for_index, selected_rows
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Landmark, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -77,9 +77,7 @@ class Scenario(BaseScenario):
     fresh_observations = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        validate(config)
-        self.green_mass = config["green_mass"]
+        configure(self, kwargs, DEFAULTS, validate)
         self.plot_grid = True
 
         world = World(batch_dim, device, linear_friction=LINEAR_FRICTION, drag=0, dt=DT, substeps=SUBSTEPS)
@@ -149,9 +147,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
 
     def __init__(self, continuous_action: bool = True, **scenario_kwargs) -> None:
         super().__init__(continuous_action)
-        if not continuous_action:
-            raise ValueError("vel_control heuristic: only continuous actions are supported")
-        validate(heuristic_kwargs("vel_control", DEFAULTS, scenario_kwargs))
+        validate(continuous_heuristic_kwargs("vel_control", DEFAULTS, scenario_kwargs, continuous_action))
 
     def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
         vel = observation[:, 2:4]
