@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Union
 
 import numpy as np
+import pytest
 import torch
 
 import vmas_ros
@@ -35,7 +36,7 @@ from vmas_ros.testing.state import changed_rows, entity_state
 
 __all__ = [
     "ACTION_MODES", "SPACE_MODES", "make", "make_upstream", "assert_same_space", "space_actions", "random_steps",
-    "check_spaces", "copy_start", "ResetCheck", "check_reset_at", "make_mpe", "copy_env_to_mpe", "play_lineups",
+    "check_kwargs_refused", "check_spaces", "copy_start", "ResetCheck", "check_reset_at", "make_mpe", "copy_env_to_mpe", "play_lineups",
     "team_returns",
 ]
 
@@ -77,6 +78,18 @@ def check_spaces(ours, up, steps: int, gen: Optional[torch.Generator] = None, as
         fits = [space_mismatch(o, s, ours.num_envs, f"observation {i}") for i, (o, s) in enumerate(zip(obs, spaces))]
     assert fits == [None] * len(fits), [problem for problem in fits if problem]
     return obs, rews
+
+
+# ---------------------------------------------------------------------- kwargs
+def check_kwargs_refused(make: Callable, num_envs: int, bad: Sequence[dict]) -> None:
+    """``make(num_envs, **kwargs)`` warns about an unknown kwarg, naming it, and raises ValueError
+    naming the kwarg for each ``{name: value}`` of ``bad``."""
+    with pytest.warns(UserWarning, match="not_a_kwarg"):
+        make(num_envs, not_a_kwarg=1)
+    for kwargs in bad:
+        (name,) = kwargs
+        with pytest.raises(ValueError, match=name):
+            make(num_envs, **kwargs)
 
 
 # ---------------------------------------------------------------------- resets

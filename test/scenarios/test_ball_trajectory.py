@@ -26,15 +26,6 @@ def make(num_envs: int = 4, **kwargs):
     return harness.make(ball_trajectory.Scenario(), num_envs, **kwargs)
 
 
-def copy_world(up, ours) -> None:
-    """Every entity's state, the rods last (placing an agent re-places its rod at the anchors' midpoint)."""
-    parity.copy_state(up, ours)
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        if e_ours.name.startswith("joint"):
-            for field in parity.FIELDS:
-                getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
-
-
 # ------------------------------------------------------------------- construction
 def test_construction():
     env = make(2)
@@ -71,13 +62,13 @@ def test_spaces_match_upstream(mode):
 # ------------------------------------------------------------------------- parity
 def compare(joints: bool, kwargs: dict, steps: int) -> parity.Lockstep:
     up, ours = harness.make_upstream(NAME, 4, **kwargs), make(4, **kwargs)
-    copy_world(up, ours)
+    parity.copy_state(up, ours)
     vmas_states.ball_trajectory(up, ours)
     gen, seen = torch.Generator().manual_seed(0), parity.Lockstep()
     parity.assert_same_state(up, ours, 0)
     for step in range(1, steps + 1):
         if joints:
-            copy_world(up, ours)
+            parity.copy_state(up, ours)
         actions = parity.uniform_actions(up, gen)
         obs_up, rew_up, _, info_up = up.step([a.clone() for a in actions])
         obs, rew, done, info = ours.step([a.clone() for a in actions])

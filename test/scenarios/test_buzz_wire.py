@@ -12,7 +12,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import buzz_wire
 
 NAME = "buzz_wire"
@@ -21,16 +21,6 @@ CUSTOM = {"random_start_angle": False, "pos_shaping_factor": 2.0, "collision_rew
 
 def make(num_envs: int = 4, **kwargs):
     return harness.make(buzz_wire.Scenario(), num_envs, **kwargs)
-
-
-def copy_start(up, ours) -> None:
-    """Upstream's start into ours: every entity, the rods last, and the position shaping."""
-    parity.copy_state(up, ours)
-    for e_up, e_ours in zip(up.world.entities, ours.world.entities):
-        if e_ours.name.startswith("joint"):
-            for field in parity.FIELDS:
-                getattr(e_ours, f"set_{field}")(getattr(e_up.state, field).clone(), batch_index=None)
-    ours.scenario.pos_shaping = up.scenario.pos_shaping.clone()
 
 
 # ------------------------------------------------------------------- construction
@@ -71,7 +61,7 @@ def test_spaces_match_upstream(mode):
 def test_matches_upstream_vmas(kwargs):
     """Random actions biased to the right: the ball hits the wall, so collisions and done are exercised."""
     up, ours = harness.make_upstream(NAME, 4, **kwargs), make(4, **kwargs)
-    copy_start(up, ours)
+    harness.copy_start(up, ours, vmas_states.buzz_wire)
     parity.assert_same_state(up, ours, 0)
     gen, penalties, dones = torch.Generator().manual_seed(0), 0.0, 0
     for step in range(1, 31):

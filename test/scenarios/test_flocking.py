@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from test.scenarios import harness
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import flocking
 from vmas_ros.simulator.heuristic_policy import RandomPolicy
 
@@ -111,16 +111,9 @@ def test_reset_at_resets_exactly_those_envs(index):
 
 
 # ------------------------------------------------------------------------- parity
-def copy_clock_and_shaping(up, ours) -> None:
-    """Besides positions, the reward depends on per-env state drawn at reset: the target's clock
-    (its heading) and each agent's last shaping value, which upstream computed from its own draw."""
-    ours.scenario.t = up.scenario.t.clone()
-    ours.scenario.distance_shaping = torch.stack([a.distance_shaping for a in up.world.policy_agents]).clone()
-
-
 def test_matches_upstream_vmas():
     up, ours = harness.make_upstream(NAME, 6), make(6)
-    harness.copy_start(up, ours, copy_clock_and_shaping)
+    harness.copy_start(up, ours, vmas_states.flocking)
     seen = parity.run_lockstep(up, ours, seed=0, steps=40)
     assert seen.fastest > 0.3  # the target got going
 
@@ -129,7 +122,7 @@ def test_matches_upstream_vmas_in_contact():
     """Custom kwargs, agents and obstacles packed into a small square: collisions and lidar hits happen."""
     up, ours = harness.make_upstream(NAME, 6, **CUSTOM), make(6, **CUSTOM)
     parity.copy_random_state(up, ours, seed=3, spread=0.35)
-    harness.copy_start(up, ours, copy_clock_and_shaping)
+    harness.copy_start(up, ours, vmas_states.flocking)
     lidar_hits, collision_steps = [], 0
     for step in range(30):
         actions = parity.uniform_actions(up, torch.Generator().manual_seed(step))

@@ -11,7 +11,7 @@ import torch
 
 from test.scenarios import harness
 from test.scenarios.harness import SPACE_MODES
-from vmas_ros.testing import parity
+from vmas_ros.testing import parity, vmas_states
 from vmas_ros.scenarios import navigation
 
 NAME = "navigation"
@@ -117,11 +117,6 @@ def test_starting_state_spreads_and_shares_goals():
 
 
 # ------------------------------------------------------------------------- parity
-def copy_shaping(up, ours) -> None:
-    """Upstream keeps each agent's last distance to goal (x pos_shaping_factor); the next reward needs it."""
-    ours.scenario.pos_shaping = torch.stack([a.pos_shaping for a in up.world.agents], dim=1).clone()
-
-
 def crowd(spread: float):
     """Start every agent within ``spread`` of the origin, in both envs, so that they meet."""
     def place(up, ours) -> None:
@@ -132,7 +127,7 @@ def crowd(spread: float):
             a_ours.set_pos(pos.clone(), batch_index=None)
             distance = torch.linalg.vector_norm(pos - a_up.goal.state.pos, dim=-1)
             a_up.pos_shaping = distance * up.scenario.pos_shaping_factor
-        copy_shaping(up, ours)
+        vmas_states.navigation(up, ours)
     return place
 
 
@@ -171,7 +166,7 @@ def lockstep_with_infos(up, ours, steps: int, actions) -> dict:
 def test_matches_upstream_vmas_random_play():
     """The plain run: upstream's own reset, uniform random forces, 50 steps."""
     up, ours = harness.make_upstream(NAME, 6), make(6)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.navigation)
     seen = parity.run_lockstep(up, ours, seed=0, steps=50)
     assert seen.fastest > 0.2 and seen.largest_reward > 0
 
@@ -200,7 +195,7 @@ def test_matches_upstream_vmas_in_contact(options, steps):
 def test_matches_upstream_vmas_without_collisions(options):
     batch = 6
     up, ours = harness.make_upstream(NAME, batch, **options), make(batch, **options)
-    harness.copy_start(up, ours, copy_shaping)
+    harness.copy_start(up, ours, vmas_states.navigation)
     ours_goals = positions([a.goal for a in ours.agents])
     torch.testing.assert_close(ours_goals, positions([a.goal for a in up.agents]))  # shared goals copied
     seen = lockstep_with_infos(up, ours, 40, goal_seeking(up, noise=0.3))
@@ -213,7 +208,7 @@ def test_collision_penalty_is_gated_batch_wide_as_upstream():
     the pair apart in env 1, yes with it overlapping there."""
     for overlap_env1, charged in ((False, 0.0), (True, -1.0)):
         up, ours = harness.make_upstream(NAME, 2, n_agents=2), make(2, n_agents=2)
-        harness.copy_start(up, ours, copy_shaping)
+        harness.copy_start(up, ours, vmas_states.navigation)
         second_x = torch.tensor([0.203, 0.15 if overlap_env1 else 0.6])
         for env in (up, ours):
             env.agents[0].set_pos(torch.zeros(2, 2), batch_index=None)

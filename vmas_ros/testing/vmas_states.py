@@ -90,6 +90,11 @@ def ball_trajectory(up, ours) -> None:
     }
 
 
+def buzz_wire(up, ours) -> None:
+    """The ball's last shaped distance to the goal, [B]."""
+    ours.scenario.pos_shaping = up.scenario.pos_shaping.clone()
+
+
 def flocking(up, ours) -> None:
     """The target's clock (its heading), [B], and each agent's last distance shaping, agent-major [n, B]."""
     ours.scenario.t = up.scenario.t.clone()
@@ -195,7 +200,7 @@ def het_mass(up, ours) -> None:
 SCENARIO_STATES: Dict[str, Callable[[object, object], None]] = {
     hook.__name__: hook for hook in (
         simple_adversary, simple_crypto, simple_push, simple_reference, simple_speaker_listener,
-        balance, ball_passage, ball_trajectory, flocking, football, give_way, joint_passage, joint_passage_size,
+        balance, ball_passage, ball_trajectory, buzz_wire, flocking, football, give_way, joint_passage, joint_passage_size,
         multi_give_way, navigation, passage, reverse_transport, road_traffic, sampling, transport, wind_flocking,
         asym_joint, goal, het_mass,
     )
