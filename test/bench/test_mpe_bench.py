@@ -4,7 +4,6 @@ Benchmarks are measurements, not timed tests: nothing here asserts on speed.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
@@ -14,6 +13,7 @@ import pytest
 import torch
 from PIL import Image
 
+from vmas_ros.bench.cli import parse_bench_args
 from vmas_ros.bench import mpe as bench
 from vmas_ros.bench.timing import Case, time_alternating, time_callable
 
@@ -121,12 +121,6 @@ def test_threads_are_restored_and_a_missing_peer_is_skipped_with_a_note(monkeypa
     assert "'vmas' is not installed" in capsys.readouterr().err
 
 
-def _parse(argv):
-    parser = argparse.ArgumentParser(prog="vmas-ros bench")
-    bench.add_bench_arguments(parser)
-    return parser.parse_args(argv)
-
-
 @pytest.mark.parametrize(
     "argv,needle",
     [
@@ -142,7 +136,7 @@ def _parse(argv):
     ],
 )
 def test_bad_arguments_return_2_with_a_reason(argv, needle, capsys, tmp_path):
-    args = _parse(argv + ["--out", str(tmp_path / "never"), "--no-progress"])
+    args = parse_bench_args(argv + ["--out", str(tmp_path / "never"), "--no-progress"])
     assert bench.run_bench_command(args) == 2
     assert needle in capsys.readouterr().err
     assert not (tmp_path / "never").exists()
@@ -150,7 +144,7 @@ def test_bad_arguments_return_2_with_a_reason(argv, needle, capsys, tmp_path):
 
 def test_command_runs_prints_the_table_and_writes_files(capsys, tmp_path):
     pytest.importorskip("matplotlib")
-    args = _parse(["mpe", "--num-envs", "1", "2", "--steps", "2", "--repeats", "1", "--mpe-max-envs", "1",
+    args = parse_bench_args(["mpe", "--num-envs", "1", "2", "--steps", "2", "--repeats", "1", "--mpe-max-envs", "1",
                    "--threads", "1", "--devices", "cpu", "--out", str(tmp_path), "--no-progress"])
     assert args.bench_num_envs == [1, 2] and args.mpe_max_envs == 1 and args.threads == 1
     assert bench.run_bench_command(args) == 0

@@ -3,22 +3,16 @@ duration, through the command line. Benchmarks are measurements: nothing here as
 only that the run happened as documented and its files say so."""
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 
 import pytest
 
+from vmas_ros.bench.cli import parse_bench_args
 from vmas_ros.bench import cli as bench_cli
 from vmas_ros.bench.node import NODE_COLUMNS
 
 pytestmark = pytest.mark.ros
-
-
-def _parse(argv):
-    parser = argparse.ArgumentParser(prog="vmas-ros bench")
-    bench_cli.add_bench_arguments(parser)
-    return parser.parse_args(argv)
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +20,7 @@ def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("node_bench")
     argv = ["node", "--duration", "0.5", "--repeats", "2", "--warmup", "0", "--no-progress", "--out", str(out),
             "--scenario-kwargs", '{"n_agents": 2}', "--lidar-rays", "8", "--unpaced-batch-ms", "3"]
-    code = bench_cli.run_bench_command(_parse(argv))
+    code = bench_cli.run_bench_command(parse_bench_args(argv))
     return code, out, json.loads((out / "node_benchmark.json").read_text())
 
 
@@ -63,7 +57,7 @@ def test_the_breakdown_covers_the_step(run):
 
 
 def test_bad_options_exit_2(tmp_path, capsys):
-    code = bench_cli.run_bench_command(_parse(["node", "--duration", "0", "--out", str(tmp_path)]))
+    code = bench_cli.run_bench_command(parse_bench_args(["node", "--duration", "0", "--out", str(tmp_path)]))
     assert code == 2 and "duration" in capsys.readouterr().err
-    code = bench_cli.run_bench_command(_parse(["node", "--unpaced-batch-ms", "-1", "--out", str(tmp_path)]))
+    code = bench_cli.run_bench_command(parse_bench_args(["node", "--unpaced-batch-ms", "-1", "--out", str(tmp_path)]))
     assert code == 2 and "unpaced_batch_ms must be in [0, 1000]" in capsys.readouterr().err

@@ -8,7 +8,6 @@ measurements, not timed tests: nothing here asserts on speed.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import statistics
@@ -18,6 +17,7 @@ import pytest
 import torch
 from PIL import Image
 
+from vmas_ros.bench.cli import parse_bench_args
 from vmas_ros.bench import cli as bench_cli
 from vmas_ros.bench import suite
 from vmas_ros.bench.suite_report import (
@@ -36,12 +36,6 @@ ARGV = ["suite", "--workloads", *RUN, "--scale", "0.002", "--steps", "2", "--rep
         "--curve-agents", "2", "4", "--max-peer-agents", "2", "--mpe-max-envs", "1", "--no-progress"]
 
 
-def _parse(argv):
-    parser = argparse.ArgumentParser(prog="vmas-ros bench")
-    bench_cli.add_bench_arguments(parser)
-    return parser.parse_args(argv)
-
-
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """One real run of the command (skipping discovery_1k even once it is registered)."""
@@ -51,7 +45,7 @@ def run(tmp_path_factory):
     real = suite._scenario_available
     patch.setattr(suite, "_scenario_available", lambda name: name != "discovery" and real(name))
     try:
-        code = bench_cli.run_bench_command(_parse(ARGV + ["--out", str(out)]))
+        code = bench_cli.run_bench_command(parse_bench_args(ARGV + ["--out", str(out)]))
     finally:
         patch.undo()
     document = json.loads((out / "suite.json").read_text())
@@ -245,7 +239,7 @@ def test_missing_peer_and_failing_workload_do_not_stop_the_suite(monkeypatch, ca
     (["--compile-physics", "--warmup", "0"], "needs --warmup >= 1 (the first run compiles), got 0"),
 ])
 def test_bad_options_exit_2_naming_the_value(argv, needle, capsys, tmp_path):
-    args = _parse(["suite"] + argv + ["--out", str(tmp_path / "never"), "--no-progress"])
+    args = parse_bench_args(["suite"] + argv + ["--out", str(tmp_path / "never"), "--no-progress"])
     assert bench_cli.run_bench_command(args) == 2
     err = capsys.readouterr().err
     assert err.startswith("vmas-ros bench suite: ") and needle in err, err
@@ -253,7 +247,7 @@ def test_bad_options_exit_2_naming_the_value(argv, needle, capsys, tmp_path):
 
 
 def test_unknown_benchmark_lists_suite_and_run_suite_validates(capsys):
-    args = _parse(["atari", "--no-progress"])
+    args = parse_bench_args(["atari", "--no-progress"])
     assert bench_cli.run_bench_command(args) == 2
     assert "unknown benchmark 'atari'; valid: mpe, suite" in capsys.readouterr().err
     with pytest.raises(ValueError, match="unknown workload 'nope'"):
@@ -399,7 +393,7 @@ def test_eager_and_compiled_side_by_side(tmp_path):
     """One real run in both modes (torch.compile compiles in the warm-up: seconds)."""
     argv = ["suite", "--workloads", "spread_1", "--modes", "eager", "compiled", "--steps", "2", "--repeats", "1",
             "--warmup", "1", "--threads", "1", "--no-progress", "--no-plot", "--out", str(tmp_path)]
-    assert bench_cli.run_bench_command(_parse(argv)) == 0
+    assert bench_cli.run_bench_command(parse_bench_args(argv)) == 0
     document = json.loads((tmp_path / "suite.json").read_text())
     assert document["modes"] == ["eager", "compiled"]
     expected = [("vmas_ros", False), ("vmas_ros_compiled", True)] + ([("vmas", False)] if HAS_VMAS else [])

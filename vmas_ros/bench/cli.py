@@ -1,5 +1,6 @@
 """Command-line handling of ``vmas-ros bench``: the options
-(:func:`add_bench_arguments`) and running them (:func:`run_bench_command`).
+(:func:`add_bench_arguments`, :func:`parse_bench_args`) and running them
+(:func:`run_bench_command`).
 Both are re-exported by :mod:`vmas_ros.bench.mpe`.
 """
 from __future__ import annotations
@@ -10,7 +11,7 @@ import sys
 from vmas_ros.bench.common import BENCHMARKS
 from vmas_ros.bench.report import plot_available
 
-__all__ = ["add_bench_arguments", "run_bench_command"]
+__all__ = ["add_bench_arguments", "parse_bench_args", "run_bench_command"]
 
 DEFAULT_NUM_ENVS = [1, 10, 100, 1000]  # bench mpe's --num-envs
 
@@ -64,6 +65,13 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
 
     add_node_bench_arguments(parser)
     return parser
+
+
+def parse_bench_args(argv) -> argparse.Namespace:
+    """The options ``vmas-ros bench <argv>`` runs with, e.g. ``["suite", "--workloads", "spread_1"]``."""
+    parser = argparse.ArgumentParser(prog="vmas-ros bench")
+    add_bench_arguments(parser)
+    return parser.parse_args(argv)
 
 
 def run_bench_command(args: argparse.Namespace) -> int:

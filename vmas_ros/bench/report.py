@@ -19,7 +19,10 @@ import torch
 
 from vmas_ros.bench.common import _LABEL, CSV_COLUMNS, PEERS, SCENARIO, SIDES
 
-__all__ = ["compute_ratios", "format_table", "machine_info", "plot_available", "write_csv", "write_results"]
+__all__ = [
+    "compute_ratios", "finish_results", "format_table", "machine_info", "plot_available", "start_results",
+    "write_csv", "write_results",
+]
 
 
 # ------------------------------------------------------------------- ratios
@@ -263,19 +266,37 @@ def write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str]) -> None:
             writer.writerow({k: _csv_value(row.get(k)) for k in columns})
 
 
-def write_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str, Path]:
-    """Write ``mpe_benchmark.csv``, ``.json`` (rows, ratios, machine info), ``.md`` (the
-    table) and, with ``plot``, ``.png`` (paper Fig. 2 style; needs matplotlib) into
-    ``out_dir``. Returns the paths by kind."""
+def start_results(rows: Sequence[dict], out_dir, stem: str,
+                  columns: Sequence[str]) -> Tuple[Path, List[dict], dict, Dict[str, Path]]:
+    """Create ``out_dir`` and write ``<stem>.csv`` (``columns`` of every row).
+
+    Returns ``(out, rows, info, paths)``: the folder, a copy of the rows, the
+    machine they ran on, and the csv/json/md paths by kind, for
+    :func:`finish_results` to complete.
+    """
     if not rows:
         raise ValueError("no rows to write")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rows = [dict(r) for r in rows]
-    info = machine_info(rows)
+    paths = {kind: out / f"{stem}.{kind}" for kind in ("csv", "json", "md")}
+    write_csv(paths["csv"], rows, columns)
+    return out, rows, machine_info(rows), paths
+
+
+def finish_results(paths: Dict[str, Path], document: dict, markdown: str) -> None:
+    """Write a benchmark's JSON ``document`` (no NaN) and its Markdown report."""
+    with open(paths["json"], "w", encoding="utf-8") as handle:
+        json.dump(document, handle, indent=2, allow_nan=False)
+    paths["md"].write_text(markdown + "\n", encoding="utf-8")
+
+
+def write_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str, Path]:
+    """Write ``mpe_benchmark.csv``, ``.json`` (rows, ratios, machine info), ``.md`` (the
+    table) and, with ``plot``, ``.png`` (paper Fig. 2 style; needs matplotlib) into
+    ``out_dir``. Returns the paths by kind."""
+    out, rows, info, paths = start_results(rows, out_dir, "mpe_benchmark", CSV_COLUMNS)
     ratios = compute_ratios(rows)
-    paths = {"csv": out / "mpe_benchmark.csv", "json": out / "mpe_benchmark.json", "md": out / "mpe_benchmark.md"}
-    write_csv(paths["csv"], rows, CSV_COLUMNS)
     notes = [
         "Timed: the steps calls of step() only; env construction, the reset before each repeat and the random "
         "actions (generated once beforehand) are not timed.",
@@ -295,10 +316,8 @@ def write_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str,
         "rows": rows,
         "ratios": ratios,
     }
-    with open(paths["json"], "w", encoding="utf-8") as handle:
-        json.dump(document, handle, indent=2, allow_nan=False)
     header = f"# MPE comparison ({SCENARIO})\n\n{_title(info, sorted({r['steps'] for r in rows})).replace(chr(10), '. ')}\n\n"
-    paths["md"].write_text(header + format_table(rows) + "\n", encoding="utf-8")
+    finish_results(paths, document, header + format_table(rows))
     if plot:
         paths["png"] = out / "mpe_benchmark.png"
         _plot(rows, paths["png"], info)

@@ -14,12 +14,11 @@ compiled rows every table is exactly what it was before modes existed.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 from vmas_ros.bench.common import _LABEL, COMPILED_SIDE
-from vmas_ros.bench.report import machine_info, write_csv
+from vmas_ros.bench.report import finish_results, start_results
 
 __all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "measured_modes",
            "summarize", "write_suite_results"]
@@ -331,15 +330,8 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
     """Write ``suite.csv`` (one row per workload point and side, every repeat), ``suite.json``
     (rows, summary, machine info), ``suite.md`` and, with ``plot``, ``suite_envs.png`` /
     ``suite_agents.png`` for the curves that were measured. Returns the paths by kind."""
-    if not rows:
-        raise ValueError("no rows to write")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = [dict(r) for r in rows]
-    info = machine_info(rows)
+    out, rows, info, paths = start_results(rows, out_dir, "suite", SUITE_COLUMNS)
     summary = summarize(rows)
-    paths = {"csv": out / "suite.csv", "json": out / "suite.json", "md": out / "suite.md"}
-    write_csv(paths["csv"], rows, SUITE_COLUMNS)
     notes = [
         "Timed: steps calls of env.step (World.step for spheres_100 and scaling_agents); building, the reset "
         "before each repeat and the random actions (one seeded generator, shared by both sides) are not.",
@@ -354,14 +346,12 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
     modes = measured_modes(rows)
     document = {"benchmark": "suite", "machine": info, "modes": modes,
                 "targets": {k: list(v) for k, v in TARGETS.items()}, "notes": notes, "rows": rows, "summary": summary}
-    with open(paths["json"], "w", encoding="utf-8") as handle:
-        json.dump(document, handle, indent=2, allow_nan=False)
     header = ("# Benchmark suite: vmas_ros vs VMAS 1.5.2\n\n"
               + f"Modes measured: {', '.join(modes) or 'none'}. "
               + _MODES_LINE.get(tuple(modes), "") + "\n\n"
               + _title(info, f"{'/'.join(map(str, sorted({r['steps'] for r in rows})))} steps per run").replace(
                   "\n", ". ") + "\n\n")
-    paths["md"].write_text(header + format_suite_table(summary) + "\n", encoding="utf-8")
+    finish_results(paths, document, header + format_suite_table(summary))
     if plot:
         for workload, kind in (("scaling_envs", "envs_png"), ("scaling_agents", "agents_png")):
             path = out / f"suite_{'envs' if kind == 'envs_png' else 'agents'}.png"
