@@ -363,14 +363,29 @@ def sim_log_dir(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("sim_node_logs")
 
 
+def killed_at_end(make: Callable[..., object]):
+    """A factory fixture's body: yields ``start(**params)``, which calls ``make(index, **params)``
+    (``index`` counts the processes started so far) and keeps the process it returns; every
+    one of them is killed when the fixture ends, whatever the test did."""
+    started: list = []
+
+    def start(**params):
+        process = make(len(started), **params)
+        started.append(process)
+        return process
+
+    try:
+        yield start
+    finally:
+        for process in started:
+            process.kill()
+
+
 @pytest.fixture(scope="module")
 def sim_node(ros, sim_log_dir):
     """Factory: ``with sim_node(seed=5, lidar_rays=12) as sim: ...`` (started and discovered)."""
-    started: List[SimProcess] = []
-
-    def start(ready_topics: Optional[Dict[str, str]] = None, **params) -> SimProcess:
-        process = SimProcess(ros, params, sim_log_dir, f"sim_node_{len(started)}")
-        started.append(process)
+    def make(index: int, ready_topics: Optional[Dict[str, str]] = None, **params) -> SimProcess:
+        process = SimProcess(ros, params, sim_log_dir, f"sim_node_{index}")
         try:
             process.wait_ready(READY_TOPICS if ready_topics is None else ready_topics)
         except BaseException:
@@ -378,24 +393,13 @@ def sim_node(ros, sim_log_dir):
             raise
         return process
 
-    yield start
-    for process in started:
-        process.kill()
+    yield from killed_at_end(make)
 
 
 @pytest.fixture(scope="module")
 def sim_process(sim_log_dir):
     """Factory for processes expected to fail at start: no discovery wait, killed at the end."""
-    started: List[SimProcess] = []
-
-    def start(**params) -> SimProcess:
-        process = SimProcess(None, params, sim_log_dir, f"bad_sim_node_{len(started)}")
-        started.append(process)
-        return process
-
-    yield start
-    for process in started:
-        process.kill()
+    yield from killed_at_end(lambda index, **params: SimProcess(None, params, sim_log_dir, f"bad_sim_node_{index}"))
 
 
 def wait_all(processes: Iterable[SimProcess], timeout: float) -> List[int]:

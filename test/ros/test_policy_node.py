@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import signal
 import time
-from typing import List
 
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from geometry_msgs.msg import PoseArray, Twist
 from std_msgs.msg import Float32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from test.ros.conftest import NODE, wait_all
+from test.ros.conftest import NODE, killed_at_end, wait_all
 from test.ros.policy_files import constant_push, seek_landmark
 from test.ros.policy_process import PolicyProcess
 
@@ -35,16 +34,7 @@ def positions(array: PoseArray) -> np.ndarray:
 @pytest.fixture(scope="module")
 def policy_node(ros, sim_log_dir):
     """Factory: ``with policy_node(policy_path=...) as node: ...`` (a policy_node process)."""
-    started: List[PolicyProcess] = []
-
-    def start(**params) -> PolicyProcess:
-        process = PolicyProcess(ros, params, sim_log_dir, f"policy_node_{len(started)}")
-        started.append(process)
-        return process
-
-    yield start
-    for process in started:
-        process.kill()
+    yield from killed_at_end(lambda index, **params: PolicyProcess(ros, params, sim_log_dir, f"policy_node_{index}"))
 
 
 @pytest.fixture(scope="module")
