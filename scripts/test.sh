@@ -12,10 +12,13 @@ bash scripts/setup.sh
 VENV="${VMAS_ROS_VENV:-.venv}"
 case "$VENV" in /*) ;; *) VENV="$ROOT/$VENV" ;; esac
 
-# A DDS domain of its own per session, so parallel runs don't see each other.
+# A DDS domain of its own per session, so parallel runs don't see each other, and
+# discovery on this machine only: no test ever talks to another host.
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( RANDOM % 100 + 1 ))}"
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 export PATH="$VENV/bin:$PATH"
-echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"
+echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE" \
+     "RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"
 
 exec "$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider "$@"

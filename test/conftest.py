@@ -20,6 +20,9 @@ def pytest_configure(config):
     # scripts/test.sh already exports one; this covers a bare `pytest`.
     if not os.environ.get("ROS_DOMAIN_ID"):
         os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
+    # DDS discovery on this machine only (also for the nodes the tests start, which
+    # inherit the environment): no test ever talks to another host.
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
     # One torch thread for the whole session: the tests step small batches, which run
     # fastest on one thread, and on a busy 2-core machine (CI, or sim_node subprocesses

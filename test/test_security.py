@@ -246,3 +246,4 @@ def test_servers_default_to_loopback():
     assert inspect.signature(FoxgloveBridge).parameters["host"].default == "127.0.0.1"
     assert "must not be empty" in validate("foxglove_host", "")
     assert os.environ.get("ROS_DOMAIN_ID"), "tests run in a domain of their own"
+    assert os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") == "LOCALHOST", "tests discover DDS peers on loopback only"

@@ -192,6 +192,7 @@ def sim_env() -> Dict[str, str]:
     env["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
     env["RCUTILS_COLORIZED_OUTPUT"] = "0"
     assert env.get("ROS_DOMAIN_ID"), "the session conftest sets ROS_DOMAIN_ID"
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     return env
 
 
