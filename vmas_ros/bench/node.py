@@ -16,6 +16,9 @@ lidar, conversion (snapshot + message fill) and publish, the rest of the wall
 time being the executor: its timers slow the node down, so steps/s comes
 from the plain windows (the node as users run it) and the parts from the
 profiled ones (``profiled_steps_per_s`` says what the timed node managed).
+When the compiled step gathers the published env itself (small batches with
+``compile_physics``), the lidar casts run inside the engine part and the
+lidar part only takes their result: compare engine + lidar across modes.
 Results go to ``node_benchmark.{csv,json,md}``.
 Benchmarks measure; tests never assert on these numbers.
 """

@@ -26,6 +26,10 @@ Starting state
     covered target moves: with ``targets_respawn`` to a fresh uniform spot
     ``min_dist_between_entities`` clear of the agents and the other targets;
     without, far outside the arena, for good.
+Differences from VMAS 1.5.2 (on purpose)
+    A respawned target's new spot is drawn our own way (batched over the
+    envs with a covered target), so with ``targets_respawn`` the spots, and
+    what follows from them, differ from VMAS's after the first cover.
 Episode termination
     Without ``targets_respawn``: when every target has been covered. With
     it, never (set ``max_steps``).

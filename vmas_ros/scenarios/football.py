@@ -42,6 +42,8 @@ Differences from VMAS 1.5.2 (on purpose)
     stay right when blue is scripted (upstream then never refreshes them). With
     one-player teams the empty teammates block is left out (upstream fails).
     Red faces left after a formation spawn too. Blue's index labels are not drawn.
+    The scripted team is our own ``football_ai``, written from the task's
+    description, not VMAS's AI: scripted players move differently from VMAS's.
 """
 from __future__ import annotations
 
