@@ -22,7 +22,8 @@ pytest.importorskip("foxglove")
 import websockets  # noqa: E402
 
 from test.foxglove_client import FoxClient, twist_json  # noqa: E402
-from vmas_ros.viz.foxglove_bridge import _SDK_LOG_LIMIT, SDK_CLIENT_LOGGERS, FoxgloveBridge  # noqa: E402
+from vmas_ros.viz.foxglove_bridge import FoxgloveBridge  # noqa: E402
+from vmas_ros.viz.foxglove_logs import _SDK_LOG_LIMIT, SDK_CLIENT_LOGGERS, SUBPROTOCOL  # noqa: E402
 from vmas_ros.viz.foxglove_messages import _MAX_CHANNELS_PER_CLIENT, _MAX_CLIENT_CHANNELS  # noqa: E402
 
 pytestmark = pytest.mark.timeout(60)
@@ -188,3 +189,23 @@ def test_the_sdks_log_lines_about_bad_clients_are_rate_limited(bridge, twists, c
     sdk = [r for r in caplog.records if r.name in SDK_CLIENT_LOGGERS]
     assert 1 <= len(sdk) <= 10, f"{len(sdk)} SDK log lines for 300 bad frames"
     assert "Invalid message" in sdk[0].getMessage()
+
+
+def test_a_client_of_the_old_protocol_is_told_what_the_node_needs(bridge, caplog):
+    """A client that offers only foxglove.websocket.v1 gets HTTP 400, and the log says which protocol and app work."""
+    caplog.set_level(logging.INFO)
+
+    async def main():
+        with pytest.raises(websockets.exceptions.InvalidStatus) as refused:
+            await websockets.connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=["foxglove.websocket.v1"])
+        assert refused.value.response.status_code == 400
+
+    run(main())
+    deadline = time.monotonic() + 5
+    while not any("refused a client" in r.getMessage() for r in caplog.records) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    lines = [r for r in caplog.records if "refused a client" in r.getMessage()]
+    assert len(lines) == 1 and lines[0].levelname == "WARNING", [r.getMessage() for r in caplog.records]
+    message = lines[0].getMessage()
+    assert "handshake failed" in message and f"only the {SUBPROTOCOL} WebSocket subprotocol" in message
+    assert "Foxglove app" in message and "foxglove.websocket.v1" in message

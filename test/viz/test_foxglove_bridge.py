@@ -448,3 +448,5 @@ def test_layout_file_is_plausible():
     assert teleop["topic"] == "/agent_0/cmd_vel" and teleop["publishRate"] > 2  # > 1 / cmd_vel_timeout
     plot = next(v for k, v in panels.items() if k.startswith("Plot!"))
     assert plot["paths"] and all(p["value"].startswith("/rewards.") for p in plot["paths"])
+    # Foxglove reads a panel's title from foxglovePanelTitle and ignores a plain "title"
+    assert all(config.get("foxglovePanelTitle") and "title" not in config for config in panels.values())

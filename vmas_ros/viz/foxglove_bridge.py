@@ -37,7 +37,7 @@ else (bad JSON, unknown topic or channel, non-finite values, payloads over
 
 The SDK itself answers malformed JSON, unknown opcodes, subscriptions to
 unknown channel ids and MessageData on unknown client channels with a status
-message and a log line (rate-limited here, ``SDK_CLIENT_LOGGERS``), and closes
+message and a log line (rate-limited, :mod:`vmas_ros.viz.foxglove_logs`), and closes
 the connection of a client that sends a frame over 16 MiB; other clients are
 not affected. A client may advertise at most 256 channels.
 
@@ -91,6 +91,7 @@ except ImportError as _error:  # pragma: no cover - depends on the installation
     ) from _error
 
 from vmas_ros.ros.convert import ScanGeometry, Snapshot, unique_names, yaw_to_quaternion
+from vmas_ros.viz.foxglove_logs import SUBPROTOCOL  # importing it also makes the SDK's client log lines useful
 from vmas_ros.viz.foxglove_messages import (  # noqa: F401 - re-exported (public names and helpers)
     _DISC_HEIGHT,
     _LINE_WIDTH,
@@ -115,44 +116,6 @@ from vmas_ros.viz.foxglove_messages import (  # noqa: F401 - re-exported (public
 __all__ = ["FoxgloveBridge", "TwistCallback", "parse_twist", "MAX_CLIENT_MESSAGE_BYTES", "TWIST_SCHEMAS"]
 
 logger = logging.getLogger(__name__)
-
-#: loggers the SDK (Rust, through Python logging) reports bad client input on, one line per message
-SDK_CLIENT_LOGGERS = ("foxglove.websocket.connected_client", "foxglove.websocket.connected_client.poller")
-
-
-class _SdkLogLimit(logging.Filter):
-    """At most ``burst`` records per ``period`` seconds per SDK logger, then one summary.
-
-    The SDK logs every malformed frame, unknown opcode or unknown channel a
-    client sends (and answers it with a status message). A client looping on
-    bad input must not flood the node's log: the first few lines show what is
-    wrong, the rest are counted.
-    """
-
-    def __init__(self, burst: int = 5, period: float = _THROTTLE_S) -> None:
-        super().__init__()
-        self.burst, self.period = burst, period
-        self._window: Dict[str, Tuple[float, int]] = {}  # logger -> (window start, records in it)
-        self._lock = threading.Lock()
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        now = time.monotonic()
-        with self._lock:
-            start, count = self._window.get(record.name, (now, 0))
-            if now - start >= self.period:
-                if count > self.burst:
-                    record.msg = f"{record.getMessage()} ({count - self.burst} similar suppressed)"
-                    record.args = ()
-                start, count = now, 0
-            self._window[record.name] = (start, count + 1)
-            return count < self.burst
-
-
-_SDK_LOG_LIMIT = _SdkLogLimit()
-for _name in SDK_CLIENT_LOGGERS:
-    if _SDK_LOG_LIMIT not in logging.getLogger(_name).filters:
-        logging.getLogger(_name).addFilter(_SDK_LOG_LIMIT)
-
 
 def _stop(server) -> None:
     try:
@@ -261,7 +224,7 @@ class FoxgloveBridge:
         self._json: Dict[str, Channel] = {}
         self._entity_ids: Tuple[Tuple[str, ...], List[str]] = ((), [])
         self._hidden: set = set()
-        logger.info("foxglove: serving on ws://%s:%d (subprotocol foxglove.sdk.v1)", host, self.port)
+        logger.info("foxglove: serving on ws://%s:%d (subprotocol %s)", host, self.port, SUBPROTOCOL)
 
     # ---------------------------------------------------------------- properties
     @property

@@ -36,6 +36,7 @@ except ImportError as _error:  # pragma: no cover - depends on the installation
     ) from _error
 
 from vmas_ros.ros.convert import yaw_to_quaternion
+from vmas_ros.viz.foxglove_logs import THROTTLE_S as _THROTTLE_S
 
 __all__ = ["TwistCallback", "parse_twist", "MAX_CLIENT_MESSAGE_BYTES", "TWIST_SCHEMAS"]
 
@@ -54,7 +55,6 @@ TWIST_SCHEMAS = frozenset({
     "geometry_msgs/TwistStamped",
     "",
 })
-_THROTTLE_S = 2.0
 _MAX_CLIENT_CHANNELS = 4096  # bound on remembered client channels over all clients
 #: one client's channels beyond this are ignored (never evicting another client's: a client that
 #: advertises thousands of channels must not break someone else's teleop)
