@@ -19,7 +19,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.json"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.json") + glob("config/*.rviz"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.py"))),
     ],
     # torch is deliberately unpinned here; scripts/setup.sh installs the pinned

@@ -21,6 +21,8 @@ PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "resource", "config", "
 REQUIRED_EXEC_DEPENDS = {
     "rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "std_srvs",
     "rosgraph_msgs", "visualization_msgs", "python3-numpy", "python3-pytorch-pip",
+    # a full ROS install resolves these; the wheels lack them and the package does without
+    "tf2_msgs", "launch", "launch_ros", "rcl_interfaces",
 }
 EXECUTABLES = ["vmas-ros"]  # console_scripts in setup.py
 COLCON_TIMEOUT_S = 300
@@ -116,6 +118,7 @@ def test_colcon_install_tree(colcon_install):
     assert (prefix / "share/ament_index/resource_index/packages" / PKG).is_file()
     assert (prefix / "share" / PKG / "package.xml").is_file()
     assert (prefix / "share" / PKG / "config" / PROBE_CONFIG).is_file()
+    assert (prefix / "share" / PKG / "config" / "vmas_ros.rviz").is_file()
     assert (prefix / "share" / PKG / "launch" / PROBE_LAUNCH).is_file()
     for exe in EXECUTABLES:
         path = prefix / "lib" / PKG / exe
@@ -225,3 +228,22 @@ def test_config_presets_are_sim_node_parameter_files():
         for name, value in params.items():
             assert validate(name, value) is None, f"{preset.name}: {name}={value!r}"
         assert set(params) <= set(SimParams.names())
+
+
+def test_rviz_config_shows_sim_node_topics_in_the_world_frame():
+    """config/vmas_ros.rviz is an RViz2 file whose displays read topics sim_node publishes, with their types."""
+    import yaml
+
+    from test.ros.conftest import READY_TOPICS
+
+    config = yaml.safe_load((ROOT / "config" / "vmas_ros.rviz").read_text())
+    manager = config["Visualization Manager"]
+    assert manager["Global Options"]["Fixed Frame"] == "world"
+    shown = {d["Topic"]["Value"]: d["Class"] for d in manager["Displays"] if "Topic" in d}
+    kinds = {"rviz_default_plugins/MarkerArray": "visualization_msgs/msg/MarkerArray",
+             "rviz_default_plugins/PoseArray": "geometry_msgs/msg/PoseArray",
+             "rviz_default_plugins/LaserScan": "sensor_msgs/msg/LaserScan"}
+    published = {**READY_TOPICS, "/agent_0/scan": "sensor_msgs/msg/LaserScan"}  # the preset adds lidars
+    assert {"/world/markers", "/agents/poses", "/agent_0/scan"} <= set(shown)
+    for topic, display in shown.items():
+        assert published[topic] == kinds[display], (topic, display)
