@@ -230,7 +230,13 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--size", type=int, default=0, help="output width in pixels (default: the scenario's)")
     render.add_argument("--fps", type=int, default=10, help="frames per second (default 10)")
     render.set_defaults(func=cmd_render)
-    sim = sub.add_parser("sim", help="start sim_node (ROS 2) without ros2 launch")
+    from vmas_ros.ros.params import SIM_PARAMS
+
+    sim = sub.add_parser("sim", help="start sim_node (ROS 2) without ros2 launch",
+                         formatter_class=argparse.RawDescriptionHelpFormatter,
+                         description="Start sim_node in this process. Any node parameter below can be given\n"
+                                     "with -p name:=value or in a --config file.",
+                         epilog=SIM_PARAMS.help())
     sim.add_argument("--config", default=None, help="ROS parameter file (e.g. config/simple_spread.yaml)")
     sim.add_argument("--scenario", default=None, help="scenario name (overrides the config)")
     sim.add_argument("--record", default=None, help="record an MCAP bag to this .mcap path")

@@ -191,11 +191,11 @@ class TestRuntimeParameters:
         ("cmd_vel_timeout", True, "finite number"),
         ("env_index", 1.5, "integer"),
         ("control", 3, "string"),
-        ("record_path", "/tmp/elsewhere.mcap", "restart"),
-        ("policy_path", "/etc/passwd", "restart"),
-        ("foxglove_host", "0.0.0.0", "restart"),
-        ("foxglove_port", 9999, "restart"),
-        ("num_envs", 1_000_000_000_000, "restart"),
+        ("record_path", "/tmp/elsewhere.mcap", "read-only"),  # start-only: read-only descriptors
+        ("policy_path", "/etc/passwd", "read-only"),
+        ("foxglove_host", "0.0.0.0", "read-only"),
+        ("foxglove_port", 9999, "read-only"),
+        ("num_envs", 1_000_000_000_000, "read-only"),
     ]
 
     def test_refused_with_a_reason_and_nothing_changes(self, ros, sim):
@@ -214,7 +214,7 @@ class TestRuntimeParameters:
                 Parameter("cmd_vel_timeout", value=0.7).to_parameter_msg(),
                 Parameter("rate_hz", value=-1.0).to_parameter_msg()])
             result = ros.call(SetParametersAtomically, f"{NODE}/set_parameters_atomically", request).result
-            assert not result.successful and "rate_hz must be >= 0" in result.reason, result.reason
+            assert not result.successful and "rate_hz must be 0 (off) or in" in result.reason, result.reason
             assert dict(zip(names, ros.get_parameters(NODE, *names))) == before
             assert ros.get_parameters(NODE, "cmd_vel_timeout") == [0.5]
             start = stamp_ns(clock.wait_for(1)[-1].clock)
@@ -284,7 +284,7 @@ START_CASES = {
                "num_envs must be an integer, got 'four'", "lidar_range must be > 0, got -1.0",
                "foxglove_port must be in [0, 65535] (0: off), got 70000",
                "rate_hz must be 0 (off) or in [0.001, 1e+06], got 1e-12", "seed must be in [0, 4294967295], got -1",
-               "lidar_rays must be in [1, 4096], got 100000", "unknown scenario 'nope'; valid: asym_joint, balance,",
+               "lidar_rays must be in [1, 4096], got 100000", "unknown scenario 'nope'; valid scenarios: asym_joint, balance,",
                "simple_spread", "is a symlink", "policy_path must end in .json or .onnx",
                "unknown parameter 'num_env' (did you mean 'num_envs'?)",
                "num_envs must be a single value, got a nested key 'num_envs.a'"],
@@ -312,9 +312,9 @@ def test_refused_at_start_with_code_2_and_the_reason(refused, case):
 def test_policy_node_refuses_bad_runtime_parameters(ros, sim_log_dir, bad_files):
     with PolicyProcess(ros, {"policy_path": str(bad_files["good_policy"])}, sim_log_dir, "policy_runtime") as node:
         node.wait_publishing(["/agent_0/action"])
-        for name, value, fragment in [("rate_hz", 1e-12, "[0.001, 1000]"), ("rate_hz", "x", "finite number"),
-                                      ("cmd_vel_scale", -2.0, "> 0"), ("output", "cmd_vel", "restart"),
-                                      ("policy_path", "/etc/passwd", "restart"), ("adapter", "os:system", "restart")]:
+        for name, value, fragment in [("rate_hz", 1e-12, "out of range"), ("rate_hz", "x", "finite number"),
+                                      ("cmd_vel_scale", -2.0, "> 0"), ("output", "cmd_vel", "read-only"),
+                                      ("policy_path", "/etc/passwd", "read-only"), ("adapter", "os:system", "read-only")]:
             result, = ros.set_parameters("/policy_node", **{name: value})
             assert not result.successful and name in result.reason and fragment in result.reason, result.reason
         assert ros.get_parameters("/policy_node", "rate_hz", "cmd_vel_scale", "output") == [10.0, 1.0, "action"]

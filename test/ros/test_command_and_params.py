@@ -112,7 +112,8 @@ def test_names_are_valid_ros_tokens_and_unique():
     "name,value,needle",
     [
         ("num_envs", 0, "num_envs"), ("num_envs", 2.5, "integer"), ("scenario", "nope", "valid"),
-        ("control", "bogus", "control"), ("real_time_factor", -1.0, ">= 0"), ("device", "tpu", "device"),
+        ("scenario", "simple_spred", "did you mean 'simple_spread'"),
+        ("control", "bogus", "control"), ("real_time_factor", -1.0, "0 (off) or in [0.001, 1e+06]"), ("device", "tpu", "device"),
         ("scenario_kwargs", "[1, 2]", "mapping"), ("lidar_range", 0.0, "> 0"), ("add_lidar", "yes", "true or false"),
         ("rate_hz", float("nan"), "finite"), ("unpaced_batch_ms", 1500.0, "[0, 1000]"),
         ("unpaced_batch_ms", -0.5, "[0, 1000]"),
@@ -135,3 +136,36 @@ def test_step_period_from_rate_and_real_time_factor():
     assert SimParams(rate_hz=50.0).step_period(0.1) == pytest.approx(0.02)
     assert SimParams(real_time_factor=2.0).step_period(0.1) == pytest.approx(0.05)
     assert SimParams(real_time_factor=0.0).step_period(0.1) == 0.0
+
+
+# ------------------------------------------------ one table: help, descriptors
+def test_every_parameter_is_described_once_with_its_descriptor():
+    from vmas_ros.ros.params import POLICY_PARAMS, SIM_PARAMS
+
+    for table in (SIM_PARAMS, POLICY_PARAMS):
+        text = table.help()
+        for name, p in table.params.items():
+            assert f"  {name} " in text and p.description in text, name
+            d = table.descriptor(name)
+            assert d.name == name and d.description == p.description and d.read_only == (not p.runtime)
+            assert d.dynamic_typing, "a parameter file's 1 for a double must still load"
+    assert SIM_PARAMS.descriptor("num_envs").integer_range[0].to_value == 10_000_000
+    assert SIM_PARAMS.descriptor("unpaced_batch_ms").floating_point_range[0].to_value == 1000.0
+    assert not SIM_PARAMS.descriptor("rate_hz").floating_point_range, "0 (off) is outside [0.001, 1e6]"
+    assert "0 (off) or in [0.001, 1e+06]" in SIM_PARAMS.descriptor("rate_hz").additional_constraints
+
+
+@pytest.mark.parametrize("argv", [["-m", "vmas_ros.ros.sim_node", "--help"], ["-m", "vmas_ros.ros.policy_node", "-h"],
+                                  ["-m", "vmas_ros.cli", "sim", "--help"]])
+def test_help_lists_every_parameter_and_exits_0(argv):
+    import subprocess
+    import sys
+
+    from vmas_ros.ros.params import POLICY_PARAMS, SIM_PARAMS
+
+    done = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    table = POLICY_PARAMS if "policy_node" in argv[1] else SIM_PARAMS
+    missing = [name for name in table.names() if f"\n  {name} " not in done.stdout]
+    assert not missing, done.stdout
+    assert "start-only" in done.stdout and "runtime" in done.stdout

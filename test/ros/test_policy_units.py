@@ -113,7 +113,7 @@ def test_load_adapter_names_the_problem():
     ("policy_path", "", "existing file"),
     ("policy_path", "/nonexistent/p.json", "existing file"),
     ("output", "twist", "output must be one of"),
-    ("rate_hz", 0.0, "> 0"),
+    ("rate_hz", 0.0, "in [0.001, 1000]"),
     ("rate_hz", math.nan, "finite"),
     ("observation_timeout", -1.0, "> 0"),
     ("adapter", "no_colon", "package.module:Class"),

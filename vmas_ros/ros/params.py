@@ -1,19 +1,19 @@
-"""sim_node's parameters: names, defaults, meaning and validation in one table.
+"""sim_node's and policy_node's parameters, each declared once in a :class:`ParamTable`.
 
-Validation is a pure function so it is tested without ROS, and so start-up
-and runtime changes apply the same rules: a bad value is refused with a reason,
-never half-applied.
+The tables give the nodes their typed values (``SimParams``,
+``PolicyNodeParams``), their validation (a pure function, tested without
+ROS, the same at start-up and for runtime changes: a bad value is refused
+with a reason, never half-applied), their ROS parameter descriptors and
+their ``--help`` (see :mod:`vmas_ros.ros.param_table`).
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import yaml
 
-#: parameters that may change while the node runs; the others need a restart
-RUNTIME = {"env_index", "cmd_vel_timeout", "control", "real_time_factor", "rate_hz", "unpaced_batch_ms"}
+from vmas_ros.ros.param_table import Param, ParamTable
+
 CONTROL_MODES = ("zero", "heuristic", "policy")
 DEVICES = ("cpu", "cuda", "auto")
 #: upper bounds that catch garbage (1e12 envs, a period rclpy cannot hold in int64 ns) before it runs
@@ -29,127 +29,65 @@ MAX_UNPACED_BATCH_MS = 1000.0
 PATH_PARAMETERS = ("record_path", "policy_path")
 
 
-@dataclass
-class SimParams:
-    """Defaults of every sim_node parameter (documented in docs/node.md)."""
+# ------------------------------------------------------------------ rules
+def _scenario(value: str, current) -> Optional[str]:
+    from vmas_ros.scenarios import list_scenarios, unknown_scenario
 
-    scenario: str = "simple_spread"
-    scenario_kwargs: str = "{}"
-    num_envs: int = 1
-    env_index: int = 0
-    device: str = "cpu"
-    compile_physics: bool = False
-    seed: int = 0
-    rate_hz: float = 0.0
-    real_time_factor: float = 1.0
-    unpaced_batch_ms: float = 4.0
-    frame_id: str = "world"
-    add_lidar: bool = True
-    lidar_rays: int = 16
-    lidar_range: float = 2.0
-    cmd_vel_timeout: float = 0.5
-    use_stamped_cmd_vel: bool = False
-    control: str = "zero"
-    foxglove_port: int = 0
-    foxglove_host: str = "127.0.0.1"
-    record_path: str = ""
-    record_topics: str = ""
-    record_max_mb: float = 0.0
-    record_max_duration_s: float = 0.0
-    policy_path: str = ""
-
-    @staticmethod
-    def names() -> List[str]:
-        return [f.name for f in fields(SimParams)]
-
-    def kwargs(self) -> Dict[str, Any]:
-        """``scenario_kwargs`` parsed (validated beforehand)."""
-        return yaml.safe_load(self.scenario_kwargs or "{}") or {}
-
-    def recorded_topics(self) -> Optional[List[str]]:
-        """The topics to record (None: everything the node publishes and receives)."""
-        names = [t.strip() for t in self.record_topics.split(",") if t.strip()]
-        return names or None
-
-    def step_period(self, dt: float) -> float:
-        """Wall-clock seconds between steps; 0 means as fast as possible.
-
-        ``rate_hz > 0`` wins; otherwise ``real_time_factor`` paces simulated time
-        against wall time (1.0: real time; 0: unpaced).
-        """
-        if self.rate_hz > 0:
-            return 1.0 / self.rate_hz
-        if self.real_time_factor > 0:
-            return dt / self.real_time_factor
-        return 0.0
+    return None if value.removesuffix(".py") in list_scenarios() else unknown_scenario(value)
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def validate(name: str, value: Any, current: Optional[SimParams] = None) -> Optional[str]:
-    """Why ``value`` is not acceptable for parameter ``name`` (None when it is)."""
-    expected = {f.name: f.type for f in fields(SimParams)}
-    if name not in expected:
-        return f"unknown parameter {name!r}; known: {', '.join(SimParams.names())}"
-    kind = expected[name]
-    if kind == "int" and (isinstance(value, bool) or not isinstance(value, int)):
-        return f"{name} must be an integer, got {value!r}"
-    if kind == "float" and not _is_number(value):
-        return f"{name} must be a finite number, got {value!r}"
-    if kind == "bool" and not isinstance(value, bool):
-        return f"{name} must be true or false, got {value!r}"
-    if kind == "str" and not isinstance(value, str):
-        return f"{name} must be a string, got {value!r}"
-    if name == "scenario":
-        from vmas_ros.scenarios import list_scenarios
-
-        if value.removesuffix(".py") not in list_scenarios():
-            return f"unknown scenario {value!r}; valid: {', '.join(list_scenarios())}"
-    if name == "scenario_kwargs":
+def _mapping(name: str, example: str):
+    def check(value: str, current) -> Optional[str]:
         try:
             parsed = yaml.safe_load(value or "{}")
         except yaml.YAMLError as error:
-            return f"scenario_kwargs must be a JSON/YAML-flow object like '{{\"n_agents\": 4}}': {error}"
+            return f"{name} must be a JSON/YAML-flow object like {example}: {error}"
         if not isinstance(parsed, dict):
-            return f"scenario_kwargs must be a mapping, got {type(parsed).__name__}"
-    if name == "num_envs" and not 1 <= value <= MAX_NUM_ENVS:
-        return f"num_envs must be in [1, {MAX_NUM_ENVS}], got {value}"
-    if name == "seed" and not 0 <= value <= MAX_SEED:
-        return f"seed must be in [0, {MAX_SEED}], got {value}"
-    if name == "env_index":
-        limit = current.num_envs if current is not None else None
-        if value < 0 or (limit is not None and value >= limit):
-            return f"env_index must be in [0, {limit}), got {value}" if limit else f"env_index must be >= 0, got {value}"
-    if name == "device" and not (value in DEVICES or value.startswith("cuda:")):
-        return f"device must be one of {', '.join(DEVICES)} or cuda:N, got {value!r}"
-    if name in ("rate_hz", "real_time_factor", "cmd_vel_timeout") and value < 0:
-        return f"{name} must be >= 0, got {value}"
-    if name in ("rate_hz", "real_time_factor") and value != 0 and not MIN_RATE <= value <= MAX_RATE:
-        return f"{name} must be 0 (off) or in [{MIN_RATE:g}, {MAX_RATE:g}], got {value}"
-    if name == "unpaced_batch_ms" and not 0 <= value <= MAX_UNPACED_BATCH_MS:
-        return f"unpaced_batch_ms must be in [0, {MAX_UNPACED_BATCH_MS:g}] (0: one step per executor round), got {value}"
-    if name == "lidar_rays" and not 1 <= value <= MAX_LIDAR_RAYS:
-        return f"lidar_rays must be in [1, {MAX_LIDAR_RAYS}], got {value}"
-    if name == "lidar_range" and value <= 0:
-        return f"lidar_range must be > 0, got {value}"
-    if name == "frame_id" and not value:
-        return "frame_id must not be empty"
-    if name == "foxglove_port" and not 0 <= value <= 65535:
-        return f"foxglove_port must be in [0, 65535] (0: off), got {value}"
-    if name == "foxglove_host" and not value:
-        return "foxglove_host must not be empty (127.0.0.1 keeps the server private to this machine)"
-    if name in ("record_max_mb", "record_max_duration_s") and value < 0:
-        return f"{name} must be >= 0 (0: no split), got {value}"
-    if name == "record_path" and value:
-        return _check_record_path(value)
-    if name == "control" and value not in CONTROL_MODES:
-        return f"control must be one of {', '.join(CONTROL_MODES)}, got {value!r}"
-    if name == "control" and value == "policy" and current is not None and not current.policy_path:
+            return f"{name} must be a mapping, got {type(parsed).__name__}"
+        return None
+    return check
+
+
+def _env_index(value: int, current) -> Optional[str]:
+    limit = current.num_envs if current is not None else None
+    if value < 0 or (limit is not None and value >= limit):
+        return f"env_index must be in [0, {limit}), got {value}" if limit else f"env_index must be >= 0, got {value}"
+    return None
+
+
+def _device(value: str, current) -> Optional[str]:
+    if value in DEVICES or value.startswith("cuda:"):
+        return None
+    return f"device must be one of {', '.join(DEVICES)} or cuda:N, got {value!r}"
+
+
+def _not_empty(name: str, why: str = ""):
+    return lambda value, current: None if value else f"{name} must not be empty{why}"
+
+
+def _control(value: str, current) -> Optional[str]:
+    if value == "policy" and current is not None and not current.policy_path:
         return "control: policy needs policy_path (an exported policy's .json), set when the node starts"
-    if name == "policy_path" and value:
-        return _check_policy_path(value, "an exported policy's .json")
+    return None
+
+
+def _record_path(value: str, current) -> Optional[str]:
+    return _check_record_path(value) if value else None
+
+
+def _sim_policy_path(value: str, current) -> Optional[str]:
+    return _check_policy_path(value, "an exported policy's .json") if value else None
+
+
+def _policy_node_policy_path(value: str, current) -> Optional[str]:
+    if not value:
+        return "policy_path must name an existing file (an exported policy's .json or .onnx), got ''"
+    return _check_policy_path(value, "an exported policy's .json or .onnx")
+
+
+def _adapter(value: str, current) -> Optional[str]:
+    if value and (value.count(":") != 1 or not all(value.split(":"))):
+        return f"adapter must be 'package.module:Class' (empty: the agents' observation topics), got {value!r}"
     return None
 
 
@@ -189,33 +127,90 @@ def _check_policy_path(value: str, what: str) -> Optional[str]:
     return None
 
 
+# ---------------------------------------------------------------- sim_node
+SIM_PARAMS = ParamTable("sim_node", [
+    Param("scenario", "simple_spread", "scenario name (vmas-ros list)", check=_scenario),
+    Param("scenario_kwargs", "{}", "JSON or YAML-flow mapping of scenario kwargs, e.g. '{n_agents: 4}'",
+          check=_mapping("scenario_kwargs", "'{\"n_agents\": 4}'")),
+    Param("num_envs", 1, "environments stepped in parallel", minimum=1, maximum=MAX_NUM_ENVS),
+    Param("env_index", 0, "the env that is published and commanded", runtime=True, check=_env_index),
+    Param("device", "cpu", "torch device: cpu, cuda, cuda:N or auto", check=_device),
+    Param("compile_physics", False, "step the physics through torch.compile (compiles for seconds at start)"),
+    Param("seed", 0, "environment seed", minimum=0, maximum=MAX_SEED),
+    Param("rate_hz", 0.0, "steps per wall-clock second; 0: paced by real_time_factor", runtime=True,
+          minimum=MIN_RATE, maximum=MAX_RATE, zero_is_off=True),
+    Param("real_time_factor", 1.0, "simulated seconds per wall second; 0: as fast as possible", runtime=True,
+          minimum=MIN_RATE, maximum=MAX_RATE, zero_is_off=True),
+    Param("unpaced_batch_ms", 4.0, "unpaced only: wall milliseconds of steps per executor round", runtime=True,
+          minimum=0.0, maximum=MAX_UNPACED_BATCH_MS, note="(0: one step per executor round)"),
+    Param("frame_id", "world", "world frame of poses, odometry and markers", check=_not_empty("frame_id")),
+    Param("add_lidar", True, "give every agent without a lidar one, so ROS consumers always get scans"),
+    Param("lidar_rays", 16, "rays of that lidar, evenly over 360 degrees", minimum=1, maximum=MAX_LIDAR_RAYS),
+    Param("lidar_range", 2.0, "range of that lidar, m", minimum=0.0, strict=True),
+    Param("cmd_vel_timeout", 0.5, "seconds after which an agent's last command is dropped", runtime=True,
+          minimum=0.0),
+    Param("use_stamped_cmd_vel", False, "subscribe geometry_msgs/TwistStamped instead of Twist"),
+    Param("control", "zero", "what drives agents with no live command (policy needs policy_path)", runtime=True,
+          choices=CONTROL_MODES, check=_control),
+    Param("foxglove_port", 0, "port of the live Foxglove WebSocket server", minimum=0, maximum=65535,
+          note="(0: off)"),
+    Param("foxglove_host", "127.0.0.1", "address the Foxglove server listens on",
+          check=_not_empty("foxglove_host", " (127.0.0.1 keeps the server private to this machine)")),
+    Param("record_path", "", "record an MCAP bag of everything published and received to this .mcap; empty: off",
+          check=_record_path),
+    Param("record_topics", "", "comma-separated topics to record; empty: all"),
+    Param("record_max_mb", 0.0, "split the bag past this size", minimum=0.0, note="(0: no split)"),
+    Param("record_max_duration_s", 0.0, "split the bag past this span of simulated time", minimum=0.0,
+          note="(0: no split)"),
+    Param("policy_path", "", "exported policy (.json or .onnx) loaded at start for control: policy",
+          check=_sim_policy_path),
+], doc="docs/node.md#parameters")
+
+#: parameters that may change while the node runs; the others need a restart
+RUNTIME = SIM_PARAMS.runtime()
+
+
+class _SimValues:
+    """What sim_node derives from its parameter values."""
+
+    @classmethod
+    def names(cls) -> List[str]:
+        return SIM_PARAMS.names()
+
+    def kwargs(self) -> Dict[str, Any]:
+        """``scenario_kwargs`` parsed (validated beforehand)."""
+        return yaml.safe_load(self.scenario_kwargs or "{}") or {}
+
+    def recorded_topics(self) -> Optional[List[str]]:
+        """The topics to record (None: everything the node publishes and receives)."""
+        names = [t.strip() for t in self.record_topics.split(",") if t.strip()]
+        return names or None
+
+    def step_period(self, dt: float) -> float:
+        """Wall-clock seconds between steps; 0 means as fast as possible.
+
+        ``rate_hz > 0`` wins; otherwise ``real_time_factor`` paces simulated time
+        against wall time (1.0: real time; 0: unpaced).
+        """
+        if self.rate_hz > 0:
+            return 1.0 / self.rate_hz
+        if self.real_time_factor > 0:
+            return dt / self.real_time_factor
+        return 0.0
+
+
+#: the values of every sim_node parameter (defaults: the table's)
+SimParams = SIM_PARAMS.values_class("SimParams", _SimValues)
+
+
+def validate(name: str, value: Any, current=None) -> Optional[str]:
+    """Why ``value`` is not acceptable for sim_node parameter ``name`` (None when it is)."""
+    return SIM_PARAMS.validate(name, value, current)
+
+
 def unknown_parameters(given: Iterable[str], known: Sequence[str], node: str) -> Tuple[List[str], List[str]]:
-    """Errors and warnings for parameter overrides the node does not declare.
-
-    A name close to a known one (``num_env``) is a typo: an error, because the
-    node would otherwise run silently with the default. Other names only get a
-    warning: a shared ``/**`` parameter file may carry values for other nodes.
-    A nested key under a known name (``num_envs.a``: a mapping in a parameter
-    file) is an error; ``qos_overrides.*`` belongs to rclpy and is left alone.
-    """
-    import difflib
-
-    errors, warnings = [], []
-    for name in sorted(set(given) - set(known)):
-        if name.startswith("qos_overrides."):
-            continue
-        root = name.split(".")[0]
-        if root in known:  # a mapping in a parameter file: rcl flattens {num_envs: {a: 1}} to num_envs.a
-            errors.append(f"{root} must be a single value, got a nested key {name!r}")
-            continue
-        if "." in name:
-            continue
-        close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
-        if close:
-            errors.append(f"unknown parameter {name!r} (did you mean {close[0]!r}?)")
-        else:
-            warnings.append(f"{node} ignores unknown parameter {name!r}; known: {', '.join(known)}")
-    return errors, warnings
+    """Errors (typos) and warnings (other names) for overrides ``node`` does not declare."""
+    return ParamTable(node, [Param(name, "", "") for name in known], doc="").unknown(given)
 
 
 def resolve_device(device: str) -> str:
@@ -230,68 +225,70 @@ def resolve_device(device: str) -> str:
 
 
 # ---------------------------------------------------------------- policy_node
-#: policy_node parameters that may change while it runs; the others need a restart
-POLICY_NODE_RUNTIME = {"rate_hz", "observation_timeout", "cmd_vel_scale"}
 POLICY_OUTPUTS = ("action", "cmd_vel")
 #: a policy runs at most this often (one ONNX call per tick); more is a unit mistake (ms for Hz)
 MAX_POLICY_RATE = 1000.0
 
+POLICY_PARAMS = ParamTable("policy_node", [
+    Param("policy_path", "", "exported policy: the .json or the .onnx of the pair; must exist",
+          check=_policy_node_policy_path),
+    Param("output", "action", "action: <agent>/action; cmd_vel: <agent>/cmd_vel Twists", choices=POLICY_OUTPUTS),
+    Param("rate_hz", 10.0, "policy steps per second", runtime=True, minimum=MIN_RATE, maximum=MAX_POLICY_RATE),
+    Param("observation_timeout", 0.5, "seconds after which an input message is too old to act on", runtime=True,
+          minimum=0.0, strict=True),
+    Param("adapter", "", "observation adapter package.module:Class; empty: each agent's <agent>/observation",
+          check=_adapter),
+    Param("adapter_kwargs", "{}", "JSON or YAML-flow mapping passed to the adapter",
+          check=_mapping("adapter_kwargs", "'{\"scale\": 2}'")),
+    Param("cmd_vel_scale", 1.0, "metres per second per action unit for output: cmd_vel", runtime=True,
+          minimum=0.0, strict=True),
+], doc="docs/policy_node.md#parameters")
 
-@dataclass
-class PolicyNodeParams:
-    """Defaults of every policy_node parameter (documented in docs/policy_node.md)."""
+#: policy_node parameters that may change while it runs; the others need a restart
+POLICY_NODE_RUNTIME = POLICY_PARAMS.runtime()
 
-    policy_path: str = ""
-    output: str = "action"
-    rate_hz: float = 10.0
-    observation_timeout: float = 0.5
-    adapter: str = ""
-    adapter_kwargs: str = "{}"
-    cmd_vel_scale: float = 1.0
 
-    @staticmethod
-    def names() -> List[str]:
-        return [f.name for f in fields(PolicyNodeParams)]
+class _PolicyValues:
+    """What policy_node derives from its parameter values."""
+
+    @classmethod
+    def names(cls) -> List[str]:
+        return POLICY_PARAMS.names()
 
     def kwargs(self) -> Dict[str, Any]:
         """``adapter_kwargs`` parsed (validated beforehand)."""
         return yaml.safe_load(self.adapter_kwargs or "{}") or {}
 
 
+#: the values of every policy_node parameter (defaults: the table's)
+PolicyNodeParams = POLICY_PARAMS.values_class("PolicyNodeParams", _PolicyValues)
+
+
 def validate_policy_node(name: str, value: Any) -> Optional[str]:
     """Why ``value`` is not acceptable for policy_node parameter ``name`` (None when it is)."""
-    expected = {f.name: f.type for f in fields(PolicyNodeParams)}
-    if name not in expected:
-        return f"unknown parameter {name!r}; known: {', '.join(PolicyNodeParams.names())}"
-    if expected[name] == "float" and not _is_number(value):
-        return f"{name} must be a finite number, got {value!r}"
-    if expected[name] == "str" and not isinstance(value, str):
-        return f"{name} must be a string, got {value!r}"
-    if name == "policy_path":
-        if not value:
-            return "policy_path must name an existing file (an exported policy's .json or .onnx), got ''"
-        return _check_policy_path(value, "an exported policy's .json or .onnx")
-    if name == "output" and value not in POLICY_OUTPUTS:
-        return f"output must be one of {', '.join(POLICY_OUTPUTS)}, got {value!r}"
-    if name in ("rate_hz", "observation_timeout", "cmd_vel_scale") and value <= 0:
-        return f"{name} must be > 0, got {value}"
-    if name == "rate_hz" and not MIN_RATE <= value <= MAX_POLICY_RATE:
-        return f"rate_hz must be in [{MIN_RATE:g}, {MAX_POLICY_RATE:g}], got {value}"
-    if name == "adapter" and value and (value.count(":") != 1 or not all(value.split(":"))):
-        return f"adapter must be 'package.module:Class' (empty: the agents' observation topics), got {value!r}"
-    if name == "adapter_kwargs":
-        try:
-            parsed = yaml.safe_load(value or "{}")
-        except yaml.YAMLError as error:
-            return f"adapter_kwargs must be a JSON/YAML-flow object: {error}"
-        if not isinstance(parsed, dict):
-            return f"adapter_kwargs must be a mapping, got {type(parsed).__name__}"
-    return None
+    return POLICY_PARAMS.validate(name, value)
 
 
 # ------------------------------------------------------------------ start-up
-def run_checked(name: str, make_node, argv: Optional[List[str]] = None) -> int:
+def asks_for_help(argv: Optional[List[str]]) -> bool:
+    """Whether a node's command line asks for ``-h``/``--help`` (before any ``--ros-args``)."""
+    import sys
+
+    args = list(sys.argv if argv is None else argv)[1:]
+    own = args[:args.index("--ros-args")] if "--ros-args" in args else args
+    return "-h" in own or "--help" in own
+
+
+def node_help(table: ParamTable, usage: str) -> str:
+    """A node's ``--help``: how to start it, then every parameter from its table."""
+    return f"usage: {usage}\n\n{table.help()}\n"
+
+
+def run_checked(name: str, make_node, argv: Optional[List[str]] = None, table: Optional[ParamTable] = None) -> int:
     """``lifecycle.run_node``, with command-line and parameter-file errors refused like bad values.
+
+    With ``-h``/``--help`` it prints the node's parameters (from ``table``) and
+    returns 0 before rclpy starts.
 
     ``rclpy.init`` parses ``--ros-args`` itself: a missing, unreadable or
     corrupt ``--params-file`` or a malformed ``-p`` raises ``RCLError`` before
@@ -302,6 +299,9 @@ def run_checked(name: str, make_node, argv: Optional[List[str]] = None) -> int:
 
     from vmas_ros.ros.lifecycle import run_node
 
+    if table is not None and asks_for_help(argv):
+        print(node_help(table, f"{name} [--help] [--ros-args -p name:=value ... | --params-file FILE]"), end="")
+        return 0
     try:
         return run_node(name, make_node, argv)
     except Exception as error:

@@ -28,15 +28,14 @@ import time
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from vmas_ros.ros.adapters import load_adapter
 from vmas_ros.ros.convert import unique_names
 from vmas_ros.ros.lifecycle import ConfigError
-from vmas_ros.ros.params import (POLICY_NODE_RUNTIME, PolicyNodeParams, run_checked, unknown_parameters,
-                                validate_policy_node)
+from vmas_ros.ros.params import POLICY_PARAMS, PolicyNodeParams, run_checked
 from vmas_ros.ros.topic_audit import TopicAudit
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -50,13 +49,8 @@ class PolicyNode(Node):
 
     def __init__(self, **overrides: Any) -> None:
         super().__init__("policy_node")
-        defaults = PolicyNodeParams()
-        for name in PolicyNodeParams.names():
-            self.declare_parameter(
-                name, overrides.get(name, getattr(defaults, name)),
-                ParameterDescriptor(description="see docs/policy_node.md: parameters", dynamic_typing=True),
-            )
-        self.params = self._read_params()
+        self.params = POLICY_PARAMS.declare(self, PolicyNodeParams, overrides)
+        POLICY_PARAMS.log_refusals(self, lambda: self.params)
         self.policy = self._load_policy()
         self.agent_names = unique_names(self.policy.agents)
         try:
@@ -81,19 +75,6 @@ class PolicyNode(Node):
         )
 
     # ----------------------------------------------------------------- set-up
-    def _read_params(self) -> PolicyNodeParams:
-        values = {name: self.get_parameter(name).value for name in PolicyNodeParams.names()}
-        overrides = [n for n in getattr(self, "_parameter_overrides", {}) if not self.has_parameter(n)]
-        errors, notes = unknown_parameters(overrides, PolicyNodeParams.names(), "policy_node")
-        for note in notes:
-            self.get_logger().warning(note)
-        errors += [error for name, value in values.items() if (error := validate_policy_node(name, value))]
-        if errors:
-            raise ConfigError("; ".join(errors))
-        for name in ("rate_hz", "observation_timeout", "cmd_vel_scale"):
-            values[name] = float(values[name])
-        return PolicyNodeParams(**values)
-
     def _load_policy(self):
         from vmas_ros.policy.onnx_policy import OnnxPolicy
 
@@ -125,13 +106,8 @@ class PolicyNode(Node):
                                 for n in self.agent_names]
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        for parameter in parameters:
-            if parameter.name not in POLICY_NODE_RUNTIME:
-                return SetParametersResult(successful=False,
-                                           reason=f"{parameter.name} cannot change while running; restart the node")
-            if error := validate_policy_node(parameter.name, parameter.value):
-                self.get_logger().warning(f"refused parameter change: {error}")
-                return SetParametersResult(successful=False, reason=error)
+        if reason := POLICY_PARAMS.refuse_change(parameters, self.params):
+            return SetParametersResult(successful=False, reason=reason)  # logged by log_refusals
         for parameter in parameters:
             setattr(self.params, parameter.name, float(parameter.value))
             if parameter.name == "rate_hz":
@@ -199,7 +175,7 @@ class PolicyNode(Node):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of ``ros2 run vmas_ros policy_node`` (and ``policy_node`` on PATH)."""
-    return run_checked("policy_node", PolicyNode, argv)
+    return run_checked("policy_node", PolicyNode, argv, POLICY_PARAMS)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ import time
 from typing import Dict, List, Optional
 
 import torch
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -39,7 +39,7 @@ from vmas_ros.ros import convert
 from vmas_ros.ros.command import CommandGate, command_to_action
 from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.message_types import type_name
-from vmas_ros.ros.params import RUNTIME, SimParams, resolve_device, run_checked, unknown_parameters, validate
+from vmas_ros.ros.params import SIM_PARAMS, SimParams, resolve_device, run_checked
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
 from vmas_ros.ros.publish import StatePublisher, StateMessages, StepPhases
 from vmas_ros.ros.stepping import StepLoop
@@ -75,13 +75,8 @@ class SimNode(StepLoop, Node):
 
     def __init__(self, **overrides) -> None:
         super().__init__("sim_node")
-        defaults = SimParams()
-        for name in SimParams.names():
-            self.declare_parameter(
-                name, overrides.get(name, getattr(defaults, name)),
-                ParameterDescriptor(description="see docs/node.md: sim_node parameters", dynamic_typing=True),
-            )
-        self.params = self._read_params()
+        self.params = SIM_PARAMS.declare(self, SimParams, overrides, cross=("env_index", "control"))
+        SIM_PARAMS.log_refusals(self, lambda: self.params)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._build_env()
         self._build_io()
@@ -103,30 +98,9 @@ class SimNode(StepLoop, Node):
         )
 
     # ----------------------------------------------------------------- parameters
-    def _read_params(self) -> SimParams:
-        values = {name: self.get_parameter(name).value for name in SimParams.names()}
-        overrides = [n for n in getattr(self, "_parameter_overrides", {}) if not self.has_parameter(n)]
-        errors, notes = unknown_parameters(overrides, SimParams.names(), "sim_node")
-        for note in notes:
-            self.get_logger().warning(note)
-        errors += [error for name in SimParams.names() if (error := validate(name, values[name]))]
-        params = SimParams(**values) if not errors else None
-        for name in ("env_index", "control") if params is not None else ():
-            if error := validate(name, getattr(params, name), params):
-                errors.append(error)
-        if errors:
-            raise ConfigError("; ".join(errors))
-        return params
-
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        for parameter in parameters:
-            if parameter.name not in RUNTIME:
-                return SetParametersResult(
-                    successful=False, reason=f"{parameter.name} cannot change while running; restart the node"
-                )
-            if error := validate(parameter.name, parameter.value, self.params):
-                self.get_logger().warning(f"refused parameter change: {error}")
-                return SetParametersResult(successful=False, reason=error)
+        if reason := SIM_PARAMS.refuse_change(parameters, self.params):
+            return SetParametersResult(successful=False, reason=reason)  # logged by log_refusals
         for parameter in parameters:
             setattr(self.params, parameter.name, parameter.value)
             if parameter.name in ("rate_hz", "real_time_factor"):
@@ -373,7 +347,7 @@ class SimNode(StepLoop, Node):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of ``ros2 run vmas_ros sim_node`` (and ``sim_node`` on PATH)."""
-    return run_checked("sim_node", SimNode, argv)
+    return run_checked("sim_node", SimNode, argv, SIM_PARAMS)
 
 
 if __name__ == "__main__":

@@ -65,13 +65,18 @@ def list_scenarios() -> List[str]:
     return sorted(REGISTRY)
 
 
+def unknown_scenario(name) -> str:
+    """The message for a scenario name that is not registered: the closest name, then all of them."""
+    close = difflib.get_close_matches(str(name), REGISTRY, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"unknown scenario {name!r}{hint}; valid scenarios: {', '.join(list_scenarios())}"
+
+
 def _module(name: str):
     if isinstance(name, str):
         name = name.removesuffix(".py")  # VMAS accepts "simple_spread.py" too
     if not isinstance(name, str) or name not in REGISTRY:
-        close = difflib.get_close_matches(str(name), REGISTRY, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ValueError(f"unknown scenario {name!r}{hint}; valid scenarios: {', '.join(list_scenarios())}")
+        raise ValueError(unknown_scenario(name))
     return importlib.import_module(REGISTRY[name])
 
 
