@@ -14,7 +14,11 @@ Subcommands:
             scenario against its heuristic, a 2x2 figure, CSV and Markdown summary
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
     echo    print messages of a topic (``ros2 topic echo`` for wheel installs)
-    drive   publish a Twist on an agent's cmd_vel for a while
+    drive   drive an agent: a Twist on its cmd_vel for a while, once the node listens
+    topics  the topics (or services) of the ROS graph with their types
+    call    call a std_srvs Trigger, SetBool or Empty service (sim_node's reset, pause, step)
+    param   list, get, describe or set a node's parameters
+    bag     ``bag info``: what a bag holds; ``bag play``: publish it again with its timing
     soak    long runs: memory growth, NaN/inf, missed steps (engine, or sim_node with bag + Foxglove)
     bag-recover  rebuild a finished MCAP bag from one whose recorder was killed
 """
@@ -163,18 +167,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return sim_main(["sim_node"] + ros_args)
 
 
-def cmd_echo(args: argparse.Namespace) -> int:
-    from vmas_ros.ros.tools import echo
-
-    return echo(args.topic, count=args.count, timeout=args.timeout)
-
-
-def cmd_drive(args: argparse.Namespace) -> int:
-    from vmas_ros.ros.tools import drive
-
-    return drive(args.agent, args.vx, args.vy, args.wz, args.seconds)
-
-
 def _add_rollout_arguments(parser: argparse.ArgumentParser) -> None:
     """The options every rollout command takes: which scenario, how long, where and with which seed."""
     parser.add_argument("--scenario", default="simple_spread", help="scenario name (see `vmas-ros list`)")
@@ -242,18 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--record", default=None, help="record an MCAP bag to this .mcap path")
     sim.add_argument("-p", "--param", action="append", help="extra node parameter name:=value (repeatable)")
     sim.set_defaults(func=cmd_sim)
-    echo = sub.add_parser("echo", help="print messages of a topic")
-    echo.add_argument("topic", help="e.g. /agent_0/scan")
-    echo.add_argument("--count", type=int, default=1, help="messages to print (default 1)")
-    echo.add_argument("--timeout", type=float, default=10.0, help="seconds to wait (default 10)")
-    echo.set_defaults(func=cmd_echo)
-    drive = sub.add_parser("drive", help="publish a Twist on /<agent>/cmd_vel")
-    drive.add_argument("agent", help="agent name, e.g. agent_0")
-    drive.add_argument("--vx", type=float, default=0.0, help="forward speed, m/s (body frame)")
-    drive.add_argument("--vy", type=float, default=0.0, help="leftward speed, m/s (body frame)")
-    drive.add_argument("--wz", type=float, default=0.0, help="yaw rate, rad/s (counter-clockwise)")
-    drive.add_argument("--seconds", type=float, default=2.0, help="how long to drive (default 2)")
-    drive.set_defaults(func=cmd_drive)
+    from vmas_ros.rostools.cli import add_rostool_parsers
+
+    add_rostool_parsers(sub)  # vmas-ros echo, drive, topics, call, param, bag
     from vmas_ros.bench.soak import add_parser as add_soak_parser
     from vmas_ros.record.recover_cli import add_parser as add_bag_recover_parser
 

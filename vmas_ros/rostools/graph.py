@@ -1,0 +1,120 @@
+"""What the ROS tools share: a short-lived node, names resolved as ``ros2`` does, waiting.
+
+Names follow ROS 2's rules: ``/a/b`` is absolute; ``a/b`` is relative and
+resolves against the tool's namespace (``--namespace``, default ``/``), so
+``echo agent_0/pose`` reads ``/agent_0/pose`` and, with ``--namespace
+/swarm1``, ``/swarm1/agent_0/pose``.
+"""
+from __future__ import annotations
+
+import contextlib
+import re
+import time
+from typing import Callable, Iterator, Optional, TypeVar
+
+__all__ = ["ToolError", "ToolNode", "call_service", "resolve_name", "service_type", "tool_node"]
+
+T = TypeVar("T")
+
+#: ROS 2 name tokens: letters, digits and underscores, not starting with a digit
+_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+class ToolError(Exception):
+    """A refusal a tool reports as one line on stderr (exit code :attr:`exit_code`)."""
+
+    def __init__(self, message: str, exit_code: int = 1) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
+def resolve_name(name: str, namespace: str = "/") -> str:
+    """The fully qualified form of topic or service ``name`` seen from ``namespace``.
+
+    ``/x/y`` stays as it is; ``x/y`` becomes ``<namespace>/x/y``. Raises
+    :class:`ToolError` (exit code 2) for a name ROS 2 would refuse, naming it.
+    """
+    for what, value in (("name", name), ("namespace", namespace)):
+        tokens = value.strip("/").split("/") if value.strip("/") else []
+        if (what == "name" and not tokens) or not all(_TOKEN.fullmatch(t) for t in tokens) or "//" in value:
+            raise ToolError(f"{value!r} is not a valid ROS 2 {what}: expected tokens of letters, digits and "
+                            f"underscores separated by '/', e.g. 'agent_0/pose' or '/swarm1/agent_0/pose'", 2)
+    if name.startswith("/"):
+        return "/" + name.strip("/")
+    base = "/" + namespace.strip("/")
+    return (base.rstrip("/") + "/" + name.strip("/")) if base != "/" else "/" + name.strip("/")
+
+
+class ToolNode:
+    """An rclpy node in a context of its own, with the executor that spins it.
+
+    Its own context lets a tool run inside a process that already uses rclpy
+    (a test, a notebook) without touching that process's default context.
+    """
+
+    def __init__(self, name: str, namespace: str = "/") -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        self.context = rclpy.Context()
+        # Python's own Ctrl-C handling (KeyboardInterrupt), not rclpy's shutdown of every context
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context, namespace=namespace,
+                                      start_parameter_services=False, enable_rosout=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_once(self, timeout: float) -> None:
+        """Run at most one ready callback, waiting up to ``timeout`` seconds for one."""
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def wait_until(self, found: Callable[[], Optional[T]], timeout: float, period: float = 0.05) -> Optional[T]:
+        """Spin until ``found()`` returns something other than None, or ``timeout`` seconds pass
+        (then the last None)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            value = found()
+            if value is not None or time.monotonic() >= deadline:
+                return value
+            self.spin_once(min(period, max(0.0, deadline - time.monotonic())))
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+@contextlib.contextmanager
+def tool_node(name: str, namespace: str = "/") -> Iterator[ToolNode]:
+    """A :class:`ToolNode` named ``name``, shut down on the way out whatever happens."""
+    tool = ToolNode(name, namespace)
+    try:
+        yield tool
+    finally:
+        tool.close()
+
+
+def call_service(tool: ToolNode, srv_type, name: str, request, timeout: float):
+    """Call service ``name`` once and return its response; ToolError if it does not answer in
+    ``timeout`` seconds (not there, or too busy)."""
+    client = tool.node.create_client(srv_type, name)
+    try:
+        if tool.wait_until(lambda: True if client.service_is_ready() else None, timeout) is None:
+            raise ToolError(f"service {name} is not available (waited {timeout:g} s; `vmas-ros topics --services` "
+                            f"lists the services there are)")
+        future = client.call_async(request)
+        if tool.wait_until(lambda: True if future.done() else None, timeout) is None:
+            raise ToolError(f"service {name} did not answer within {timeout:g} s")
+        return future.result()
+    finally:
+        tool.node.destroy_client(client)
+
+
+def service_type(tool: ToolNode, name: str, timeout: float) -> str:
+    """The type of service ``name`` (``pkg/srv/Name``) once it shows in the graph; ToolError if not."""
+    found = tool.wait_until(lambda: (dict(tool.node.get_service_names_and_types()).get(name) or [None])[0], timeout)
+    if found is None:
+        raise ToolError(f"no service {name} appeared within {timeout:g} s (is its node running, with the same "
+                        f"ROS_DOMAIN_ID? `vmas-ros topics --services` lists the services there are)")
+    return found
