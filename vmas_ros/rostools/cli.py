@@ -17,6 +17,13 @@ __all__ = ["add_rostool_parsers"]
 NAMESPACE_HELP = "namespace that relative names resolve against, as in ros2 (default /)"
 
 
+def _graph_options(parser: argparse.ArgumentParser, waits_for: str, timeout: float = 10.0) -> None:
+    """``--timeout`` (how long to wait for ``waits_for``) and ``--namespace``, as every graph tool takes."""
+    parser.add_argument("--timeout", type=float, default=timeout,
+                        help=f"seconds to wait for {waits_for} (default {timeout:g})")
+    parser.add_argument("--namespace", default="/", help=NAMESPACE_HELP)
+
+
 def _run(name: str, body: Callable[[argparse.Namespace], object]) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
         try:
@@ -94,8 +101,7 @@ def add_rostool_parsers(sub) -> None:
                                       "ros2 topic echo TOPIC.")
     echo.add_argument("topic", help="topic name, absolute (/agent_0/scan) or relative (agent_0/scan)")
     echo.add_argument("--count", type=int, default=1, help="messages to print (default 1)")
-    echo.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for them (default 10)")
-    echo.add_argument("--namespace", default="/", help=NAMESPACE_HELP)
+    _graph_options(echo, "them")
     echo.set_defaults(func=_run("echo", _echo))
     drive = sub.add_parser(
         "drive", help="drive an agent: a Twist on <agent>/cmd_vel for a while",
@@ -128,8 +134,7 @@ def add_rostool_parsers(sub) -> None:
                                       "ROS install: ros2 service call.")
     call.add_argument("service", help="service name, e.g. /sim_node/reset or sim_node/pause")
     call.add_argument("value", nargs="?", default=None, help="true or false, for a SetBool service")
-    call.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the service (default 10)")
-    call.add_argument("--namespace", default="/", help=NAMESPACE_HELP)
+    _graph_options(call, "the service")
     call.set_defaults(func=_run("call", _call))
     param = sub.add_parser("param", help="list, get, describe or set a node's parameters (ros2 param)",
                            description="A node's parameters through its parameter services. set reads VALUE as "
@@ -138,8 +143,7 @@ def add_rostool_parsers(sub) -> None:
     param.add_argument("node", help="node name, e.g. /sim_node")
     param.add_argument("name", nargs="?", default=None, help="parameter name (get, describe, set)")
     param.add_argument("value", nargs="?", default=None, help="new value (set)")
-    param.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the node (default 10)")
-    param.add_argument("--namespace", default="/", help=NAMESPACE_HELP)
+    _graph_options(param, "the node")
     param.set_defaults(func=_run("param", _param))
     bag = sub.add_parser("bag", help="what a bag holds, or play it back (ros2 bag info|play)",
                          description="info: files, size, duration, start, end and per-topic types and counts of an "
