@@ -27,7 +27,7 @@ import pytest
 import vmas_ros
 from vmas_ros.policy.onnx_policy import MAX_METADATA_BYTES, OnnxPolicy, external_tensors
 from vmas_ros.ros.command import MAX_COMMAND, check_command
-from vmas_ros.ros.params import PATH_PARAMETERS, RUNTIME, SimParams, unknown_parameters, validate
+from vmas_ros.ros.params import PATH_PARAMETERS, RUNTIME, SIM_PARAMS, SimParams, validate
 
 PACKAGE = Path(vmas_ros.__file__).resolve().parent
 
@@ -167,9 +167,8 @@ def test_split_bag_files_stay_in_the_given_directory(tmp_path):
 
 
 def test_unknown_parameters_typos_fail_others_warn():
-    known = SimParams.names()
-    errors, warnings = unknown_parameters(["num_env", "teleop_speed", "qos_overrides./clock.publisher.depth",
-                                           "num_envs.a"], known, "sim_node")
+    errors, warnings = SIM_PARAMS.unknown(["num_env", "teleop_speed", "qos_overrides./clock.publisher.depth",
+                                           "num_envs.a"])
     assert sorted(errors) == ["num_envs must be a single value, got a nested key 'num_envs.a'",
                               "unknown parameter 'num_env' (did you mean 'num_envs'?)"]
     assert len(warnings) == 1 and "ignores unknown parameter 'teleop_speed'" in warnings[0]

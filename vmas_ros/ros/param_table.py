@@ -114,9 +114,11 @@ class ParamTable:
         return frozenset(name for name, p in self.params.items() if p.runtime)
 
     def values_class(self, class_name: str, base: type = object) -> type:
-        """A dataclass with one field per parameter (its default), deriving from ``base``."""
+        """A dataclass with one field per parameter (its default), deriving from ``base``; its
+        ``names()`` lists the parameters in the table's order."""
         fields = [(p.name, type(p.default), dataclass_field(default=p.default)) for p in self.params.values()]
-        return make_dataclass(class_name, fields, bases=(base,))
+        names = self.names
+        return make_dataclass(class_name, fields, bases=(base,), namespace={"names": staticmethod(names)})
 
     # ----------------------------------------------------------- validation
     def validate(self, name: str, value: Any, current: Any = None) -> Optional[str]:

@@ -8,7 +8,7 @@ their ``--help`` (see :mod:`vmas_ros.ros.param_table`).
 """
 from __future__ import annotations
 
-from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional
 
 import yaml
 
@@ -170,16 +170,17 @@ SIM_PARAMS = ParamTable("sim_node", [
 RUNTIME = SIM_PARAMS.runtime()
 
 
+def _parsed_mapping(text: str) -> Dict[str, Any]:
+    """A mapping parameter's value parsed (it was validated by ``_mapping`` beforehand)."""
+    return yaml.safe_load(text or "{}") or {}
+
+
 class _SimValues:
     """What sim_node derives from its parameter values."""
 
-    @classmethod
-    def names(cls) -> List[str]:
-        return SIM_PARAMS.names()
-
     def kwargs(self) -> Dict[str, Any]:
-        """``scenario_kwargs`` parsed (validated beforehand)."""
-        return yaml.safe_load(self.scenario_kwargs or "{}") or {}
+        """``scenario_kwargs`` parsed."""
+        return _parsed_mapping(self.scenario_kwargs)
 
     def recorded_topics(self) -> Optional[List[str]]:
         """The topics to record (None: everything the node publishes and receives)."""
@@ -206,11 +207,6 @@ SimParams = SIM_PARAMS.values_class("SimParams", _SimValues)
 def validate(name: str, value: Any, current=None) -> Optional[str]:
     """Why ``value`` is not acceptable for sim_node parameter ``name`` (None when it is)."""
     return SIM_PARAMS.validate(name, value, current)
-
-
-def unknown_parameters(given: Iterable[str], known: Sequence[str], node: str) -> Tuple[List[str], List[str]]:
-    """Errors (typos) and warnings (other names) for overrides ``node`` does not declare."""
-    return ParamTable(node, [Param(name, "", "") for name in known], doc="").unknown(given)
 
 
 def resolve_device(device: str) -> str:
@@ -251,13 +247,9 @@ POLICY_NODE_RUNTIME = POLICY_PARAMS.runtime()
 class _PolicyValues:
     """What policy_node derives from its parameter values."""
 
-    @classmethod
-    def names(cls) -> List[str]:
-        return POLICY_PARAMS.names()
-
     def kwargs(self) -> Dict[str, Any]:
-        """``adapter_kwargs`` parsed (validated beforehand)."""
-        return yaml.safe_load(self.adapter_kwargs or "{}") or {}
+        """``adapter_kwargs`` parsed."""
+        return _parsed_mapping(self.adapter_kwargs)
 
 
 #: the values of every policy_node parameter (defaults: the table's)
