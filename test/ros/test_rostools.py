@@ -131,11 +131,11 @@ def test_echo_reads_a_relative_name(realtime):
 
 # ---------------------------------------------------------- graph tools
 def test_topics_and_services_are_listed_with_their_types(realtime):
-    topics = vmas_ros_cli("topics")
+    topics = vmas_ros_cli("topics", "--wait", "5")  # margin over discovery's ~2 s worst case here
     assert topics.returncode == 0, topics.stderr
     assert "/agent_0/pose [geometry_msgs/msg/PoseStamped]\n" in topics.stdout
     assert "/agent_0/cmd_vel [geometry_msgs/msg/Twist]\n" in topics.stdout
-    services = vmas_ros_cli("topics", "--services", "--no-types")
+    services = vmas_ros_cli("topics", "--services", "--no-types", "--wait", "5")
     assert services.returncode == 0, services.stderr
     assert {"/sim_node/reset", "/sim_node/pause", "/sim_node/step"} <= set(services.stdout.split())
 
@@ -216,8 +216,9 @@ def test_bag_play_republishes_every_message_with_its_timing(ros, tmp_path):
     path = tmp_path / "run.mcap"
     _write_sample(path)
     poses = ros.collect(PoseStamped, "/agent_0/pose")
+    # --delay 3: a new participant's first announcements can be missed, and its next come seconds later
     player = subprocess.Popen([sys.executable, "-m", "vmas_ros.cli", "bag", "play", str(path), "--quiet",
-                               "--delay", "1.0"], cwd=REPO, env=sim_env(), stdout=subprocess.PIPE,
+                               "--delay", "3.0"], cwd=REPO, env=sim_env(), stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
     try:
         ros.spin_until(lambda: player.poll() is not None, 60, "bag play to finish")

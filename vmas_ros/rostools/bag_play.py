@@ -79,7 +79,7 @@ def play(path, rate: float = 1.0, topics: Optional[Sequence[str]] = None, delay:
             name: tool.node.create_publisher(cls, name, qos_from_yaml(wanted[name].offered_qos_profiles))
             for name, cls in classes.items()
         }
-        tool.wait_until(lambda: None, delay)
+        tool.spin_for(delay)
         sent, first_log, wall_start = 0, None, time.monotonic()
         with tqdm(total=total, desc="bag play", unit="msg", disable=not progress) as bar:
             for topic, log_time, data in _messages(path, list(publishers)):

@@ -125,7 +125,8 @@ def add_rostool_parsers(sub) -> None:
                                         "ros2 topic list -t, ros2 service list -t.")
     topics.add_argument("--services", action="store_true", help="list services instead of topics")
     topics.add_argument("--no-types", action="store_true", help="names only")
-    topics.add_argument("--wait", type=float, default=1.0, help="seconds of discovery before listing (default 1)")
+    topics.add_argument("--wait", type=float, default=3.0,
+                        help="seconds of discovery before listing (default 3: a node can take 2 s to be seen)")
     topics.set_defaults(func=_run("topics", _topics))
     call = sub.add_parser("call", help="call a std_srvs Trigger, SetBool or Empty service (ros2 service call)",
                           description="Call a std_srvs Trigger, SetBool (VALUE true or false) or Empty service and "

@@ -113,7 +113,7 @@ def drive(agent: str = "agent_0", vx: float = 0.0, vy: float = 0.0, wz: float = 
         if tool.wait_until(lambda: publisher.get_subscription_count() or None, wait) is None:
             raise ToolError(f"{topic} has a subscriber, but it did not match this publisher within {wait:g} s "
                             f"(incompatible QoS?)")
-        tool.wait_until(lambda: None, SETTLE_S)
+        tool.spin_for(SETTLE_S)
 
         def command(x: float, y: float, z: float):
             twist = Twist()
@@ -137,7 +137,7 @@ def drive(agent: str = "agent_0", vx: float = 0.0, vy: float = 0.0, wz: float = 
         driven = time.monotonic() - start
         for _ in range(STOP_REPEATS):
             publisher.publish(command(0.0, 0.0, 0.0))
-            tool.wait_until(lambda: None, period)
+            tool.spin_for(period)
         publisher.wait_for_all_acked(Duration(seconds=1.0))
         report = DriveReport(topic, message_type, sent, publisher.get_subscription_count(), driven)
     out(str(report))

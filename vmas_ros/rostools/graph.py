@@ -69,6 +69,12 @@ class ToolNode:
         """Run at most one ready callback, waiting up to ``timeout`` seconds for one."""
         self.executor.spin_once(timeout_sec=timeout)
 
+    def spin_for(self, seconds: float) -> None:
+        """Spin for ``seconds``: discovery and callbacks go on meanwhile."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            self.spin_once(min(0.05, left))
+
     def wait_until(self, found: Callable[[], Optional[T]], timeout: float, period: float = 0.05) -> Optional[T]:
         """Spin until ``found()`` returns something other than None, or ``timeout`` seconds pass
         (then the last None)."""

@@ -8,21 +8,21 @@ from vmas_ros.rostools.graph import tool_node
 __all__ = ["graph_names", "list_topics"]
 
 
-def graph_names(wait: float = 1.0, services: bool = False) -> Dict[str, List[str]]:
+def graph_names(wait: float = 3.0, services: bool = False) -> Dict[str, List[str]]:
     """Name -> types of every topic (or service) seen after ``wait`` seconds of discovery.
 
-    Discovery has no end a tool could wait for: nodes announce themselves
-    within a fraction of a second on one machine, so a short fixed wait sees
-    the graph as ``ros2`` without its daemon does.
+    Discovery has no end a tool could wait for, and a participant whose first
+    announcements were missed is seen only at a later one: on one machine that
+    takes up to about 2 s, hence the default wait.
     """
     with tool_node("vmas_ros_topics") as tool:
-        tool.wait_until(lambda: None, wait)
+        tool.spin_for(wait)
         node = tool.node
         names = node.get_service_names_and_types() if services else node.get_topic_names_and_types()
         return {name: list(types) for name, types in names}
 
 
-def list_topics(wait: float = 1.0, services: bool = False, show_types: bool = True,
+def list_topics(wait: float = 3.0, services: bool = False, show_types: bool = True,
                 out: Callable[[str], None] = print) -> Dict[str, List[str]]:
     """Print one ``name [type]`` line per topic (or service), sorted; returns what was printed."""
     names = graph_names(wait, services)
