@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Set up the venv (scripts/setup.sh), then run the main job: `vmas-ros demo`,
-# a short headless simulation. Extra arguments go to `vmas-ros demo`.
+# Set up the venv (scripts/setup.sh), then run the main job: sim_node on
+# simple_spread through `vmas-ros sim`. Extra arguments go to `vmas-ros sim`.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
