@@ -126,7 +126,7 @@ def test_clear_errors_name_the_path(tmp_path, capsys, case):
     path = tmp_path / "input.mcap"
     out = tmp_path / "out.mcap"
     expected = {"missing": f"{path}: no such file", "not_mcap": f"{path} is not an MCAP file",
-                "empty": f"{path}: empty file, nothing to recover", "directory": f"{path}: is a directory",
+                "empty": f"{path}: empty file, nothing to recover", "directory": f"{path}: a folder without NAME_<n>.mcap files, not a bag folder",
                 "no_out_dir": f"{tmp_path / 'nowhere'}: no such directory"}[case]
     if case == "not_mcap":
         path.write_text("a text file, not a bag\n")

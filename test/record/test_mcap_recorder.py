@@ -19,7 +19,9 @@ from rosgraph_msgs.msg import Clock
 
 from test.record.bag_helpers import (MS, STEPS, TOPICS, _check_sample_values, _pose_bytes, _read_mcap_ros2,
                                      _read_rosbags, _summary, _write_sample)
-from vmas_ros.record import TF_MESSAGE_TYPE, McapRecorder, qos_profile_yaml, serialize_tf_message, split_path
+from vmas_ros.record import (
+    TF_MESSAGE_TYPE, McapRecorder, RecordingFailed, qos_profile_yaml, serialize_tf_message, split_path,
+)
 
 
 # ------------------------------------------------------------- round trips
@@ -250,7 +252,8 @@ def test_a_split_file_that_is_a_symlink_is_never_written_through(tmp_path):
         assert not (tmp_path / "run_1.mcap").is_symlink()
         rec.write("/pose", "geometry_msgs/msg/PoseStamped", None, 0, serialized=_pose_bytes(0))
         (tmp_path / "run_1.mcap").symlink_to(target)  # planted while recording, before the split
-        with pytest.raises(FileExistsError, match=r"run_1.mcap appeared while recording \(a symlink to"):
+        with pytest.raises(RecordingFailed, match=r"writing \S+run_1.mcap: \S+run_1.mcap appeared while recording "
+                                                  r"\(a symlink to"):
             for i in range(1, 200):
                 rec.write("/pose", "geometry_msgs/msg/PoseStamped", None, i, serialized=_pose_bytes(i))
     assert not target.exists()

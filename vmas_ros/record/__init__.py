@@ -6,7 +6,9 @@
 * :func:`serialize_tf_message` builds /tf's ``tf2_msgs/msg/TFMessage`` CDR
   without the (wheel-less) tf2_msgs package;
 * :func:`message_definition` gives the schema text of an installed message type;
-* :func:`recover` turns the file of a killed recorder into a valid MCAP.
+* :func:`recover` turns the file of a killed recorder into a valid MCAP;
+* :mod:`vmas_ros.record.rosbag2` lays a recording out as one file or as a
+  rosbag2 bag folder with its ``metadata.yaml``.
 
 Needs the ``record`` extra (``mcap``, ``mcap-ros2-support``) and rclpy for
 serialising messages.
@@ -15,6 +17,8 @@ from vmas_ros.record.mcap_recorder import (
     DEFAULT_COMPRESSION,
     TF_MESSAGE_TYPE,
     McapRecorder,
+    RecordingExists,
+    RecordingFailed,
     qos_profile_yaml,
     serialize_tf_message,
     split_path,
@@ -25,6 +29,8 @@ from vmas_ros.record.schemas import message_definition
 __all__ = [
     "DEFAULT_COMPRESSION",
     "McapRecorder",
+    "RecordingExists",
+    "RecordingFailed",
     "TF_MESSAGE_TYPE",
     "message_definition",
     "qos_profile_yaml",

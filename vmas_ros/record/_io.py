@@ -6,6 +6,7 @@ write and topic-name normalisation. Public names are re-exported by
 """
 from __future__ import annotations
 
+import errno
 import os
 import re
 import signal
@@ -174,6 +175,12 @@ class _UnbufferedFile:
     def flush(self) -> None:
         pass
 
+    def check_linked(self, path: Path) -> None:
+        """Raise FileNotFoundError if the open file was deleted (or its folder removed) meanwhile:
+        writes to it still succeed, but nothing of them would remain."""
+        if self._fd >= 0 and os.fstat(self._fd).st_nlink == 0:
+            raise FileNotFoundError(errno.ENOENT, "the file was deleted while recording", str(path))
+
     def close(self) -> None:
         if self._fd >= 0:
             fd, self._fd = self._fd, -1
@@ -191,6 +198,7 @@ class _OpenFile:
         self.schemas: Dict[str, int] = {}
         self.channels: Dict[str, int] = {}
         self.messages = 0
+        self.flushed_messages = 0  # messages in chunks already handed to the OS: what a failure keeps
         self.first_log_time: Optional[int] = None
         # the open chunk, as the writer will write it out: records (uncompressed),
         # messages and channels (for the message indexes that follow the chunk)
@@ -217,6 +225,7 @@ class _OpenFile:
                 self._chunk_channels.add(channel_id)
 
     def _reset_chunk(self) -> None:
+        self.flushed_messages = self.messages
         self._chunk_records = self._chunk_messages = 0
         self._chunk_channels.clear()
 
@@ -249,9 +258,14 @@ class _OpenFile:
 
     def close(self) -> None:
         try:
+            self.stream.check_linked(self.path)
             self.writer.finish()
         finally:
             self.stream.close()
+
+    def abandon(self) -> None:
+        """Close the file without its summary (after a write error): what is on disk stays."""
+        self.stream.close()
 
 
 # ------------------------------------------------------------ signals, topics

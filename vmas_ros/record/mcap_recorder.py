@@ -9,13 +9,23 @@ chunks, and on close a summary (schemas, channels, statistics, chunk and
 message indexes). ``rosbags``, ``mcap-ros2-support``, Foxglove and ``ros2 bag``
 read the files.
 
-Split files
-    With ``max_bytes`` or ``max_duration_s`` the recording continues in a new
-    file when the current one is full. The first file is ``path`` itself, the
-    next ones sit beside it as ``<stem>_1.mcap``, ``<stem>_2.mcap``, ... where
-    ``<stem>`` is the name of ``path`` without its ``.mcap`` suffix
-    (``run.mcap`` -> ``run_1.mcap``, ``run_2.mcap``). Every file is a complete,
+Files and folders
+    A path ending in ``.mcap`` is a single file; any other path is a rosbag2
+    bag folder (``NAME/NAME_0.mcap`` and ``NAME/metadata.yaml``, written at
+    close); see :mod:`vmas_ros.record.rosbag2`. With ``max_bytes`` or
+    ``max_duration_s`` the recording continues in a new file when the current
+    one is full: ``run_1.mcap``, ``run_2.mcap``, ... beside ``run.mcap``, or
+    ``NAME_1.mcap``, ... in the folder. Every file is a complete,
     independently readable MCAP. :attr:`McapRecorder.paths` lists them.
+
+Write errors
+    A full disk, a read-only or vanished folder: the first failed write ends
+    the recording (:class:`RecordingFailed` says what failed, where, and how
+    many messages are safe) and later writes are dropped. The files keep every
+    chunk written before the failure; ``vmas-ros bag-recover`` finishes them.
+    With ``on_failure`` the error goes to that callback instead of being raised
+    from the write, so a node can keep running. A file deleted while open is
+    noticed when it is closed (the writes themselves still succeed).
 
 Durability
     Messages collect in an in-memory chunk (``chunk_size`` bytes, before
@@ -52,7 +62,7 @@ import os
 import signal
 import threading
 from pathlib import Path
-from typing import Dict, Iterable, Iterator, List, Optional, Tuple, Union
+from typing import Callable, Dict, Iterable, Iterator, List, Optional, Tuple, Union
 
 from mcap.writer import CompressionType
 
@@ -71,18 +81,19 @@ from vmas_ros.record._io import (  # noqa: F401 - re-exported
     _absolute,
     _OpenFile,
     _pad,
-    _stale_split_files,
     _UnbufferedFile,
     qos_profile_yaml,
-    refuse_symlink,
     serialize_tf_message,
     split_path,
 )
+from vmas_ros.record.rosbag2 import BagFolder, RecordingExists, bag_layout  # noqa: F401 - re-exported
 from vmas_ros.record.schemas import message_definition, normalize_type
 
 __all__ = [
     "DEFAULT_COMPRESSION",
     "McapRecorder",
+    "RecordingExists",
+    "RecordingFailed",
     "TF_MESSAGE_TYPE",
     "qos_profile_yaml",
     "serialize_tf_message",
@@ -105,11 +116,36 @@ _COMPRESSIONS = {
 }
 
 
+class RecordingFailed(RuntimeError):
+    """Writing the bag failed (disk full, read-only, vanished): the recording has ended.
+
+    ``bag`` is the recording's path, ``path`` the file that failed, ``cause``
+    the OSError, ``safe`` the messages in chunks known to be complete on disk
+    (a chunk whose write failed after its last byte, in its index, counts
+    only when recovered, so the bag may hold a chunk more),
+    ``total`` the messages recorded up to the failure and ``unfinished``
+    whether a file was left without its summary (``vmas-ros bag-recover``
+    finishes it; for a folder it also rebuilds ``metadata.yaml``).
+    """
+
+    def __init__(self, bag: Path, path, cause: OSError, safe: int, total: int, unfinished: bool,
+                 folder: bool) -> None:
+        self.bag, self.path, self.cause = bag, Path(path), cause
+        self.safe, self.total, self.unfinished = safe, total, unfinished
+        reason = cause.strerror or str(cause) or type(cause).__name__
+        text = (f"recording to {bag} failed: writing {self.path}: {reason}; "
+                f"at least {safe} of {total} messages are safe")
+        if unfinished or folder:
+            text += f" (`vmas-ros bag-recover {bag}` makes the bag readable)"
+        super().__init__(text)
+
+
 # --------------------------------------------------------------- the recorder
 class McapRecorder:
     """Records ROS 2 messages to rosbag2-compatible MCAP files.
 
-    :param path: the first (or only) file; see the module docstring for split names.
+    :param path: ``NAME.mcap`` (a single file and its splits) or ``NAME`` (a
+        rosbag2 bag folder); see the module docstring.
     :param topics: topics to record (None: all); writes to other topics are ignored.
     :param max_bytes: start a new file before a message would grow the current
         one's data section past this many bytes (the open chunk counts
@@ -122,11 +158,14 @@ class McapRecorder:
     :param compression: ``"zstd"`` (the default when ``zstandard`` is installed),
         ``"lz4"`` or ``"none"``.
     :param overwrite: replace an existing recording at ``path`` (including its
-        ``<stem>_<n>.mcap`` split files); otherwise an existing file is an error.
-        A symlink at ``path`` is always refused (FileExistsError naming it and its
-        target), dangling or not: the recording would land where it points. Every
-        file is created new (``O_EXCL | O_NOFOLLOW``), never opened in place.
+        ``<stem>_<n>.mcap`` split files, or a bag folder's files); otherwise an
+        existing recording is refused (:class:`RecordingExists`). A symlink at
+        ``path`` is always refused (FileExistsError naming it and its target),
+        dangling or not: the recording would land where it points. Every file
+        is created new (``O_EXCL | O_NOFOLLOW``), never opened in place.
     :param defer_signals: block SIGINT/SIGTERM during a write from the main thread.
+    :param on_failure: called with the :class:`RecordingFailed` of a write
+        error instead of raising it (from whichever thread wrote).
 
     Topic names are fully qualified: a name without a leading ``/`` gets one,
     both in ``topics`` and in writes. Log times are nanoseconds and must not
@@ -144,6 +183,7 @@ class McapRecorder:
         compression: Optional[str] = DEFAULT_COMPRESSION,
         overwrite: bool = False,
         defer_signals: bool = True,
+        on_failure: Optional[Callable[[RecordingFailed], None]] = None,
     ) -> None:
         if isinstance(topics, str):
             raise TypeError("topics must be an iterable of topic names, not a single string")
@@ -157,17 +197,13 @@ class McapRecorder:
             raise ValueError(f"compression must be 'zstd', 'lz4' or 'none', not {compression!r}")
         if compression == "zstd" and DEFAULT_COMPRESSION != "zstd":
             raise ValueError("compression='zstd' needs the zstandard package (pip install zstandard)")
-        self._path = Path(path)
-        refuse_symlink(self._path)  # even with overwrite: a link is not a recording to replace
-        stale = _stale_split_files(self._path)
-        present = os.path.lexists(self._path)
-        if not overwrite and (present or stale):
-            raise FileExistsError(
-                f"{self._path if present else stale[0]} exists; choose another path or pass overwrite=True"
-            )
-        for old in ([self._path] if present else []) + stale:
-            old.unlink()  # the files are created anew (O_EXCL), never opened where they are
-        self._path.parent.mkdir(parents=True, exist_ok=True)
+        self._layout = bag_layout(path)
+        self._path = self._layout.bag
+        self._layout.prepare(overwrite)
+        self._on_failure = on_failure
+        self._failure: Optional[RecordingFailed] = None
+        self._finished: List[Tuple[Path, int]] = []  # files closed complete, with their message counts
+        self._first_log_time: Optional[int] = None
         self._topics = None if topics is None else frozenset(_absolute(t) for t in topics)
         self._max_bytes = max_bytes
         self._max_duration_ns = None if max_duration_s is None else int(round(max_duration_s * 1e9))
@@ -208,6 +244,27 @@ class McapRecorder:
     @property
     def closed(self) -> bool:
         return self._closed
+
+    @property
+    def bag(self) -> Path:
+        """The recording's path: the ``.mcap`` file or the bag folder."""
+        return self._path
+
+    @property
+    def failure(self) -> Optional[RecordingFailed]:
+        """Why the recording ended early, or None."""
+        return self._failure
+
+    @property
+    def duration_ns(self) -> int:
+        """Log time between the first and the last message recorded."""
+        return 0 if self._last is None else self._last[0] - self._first_log_time
+
+    def describe(self) -> str:
+        """One line for a log: where, how many messages, what span of log time."""
+        files = len(self._paths)
+        return (f"{self._path}: {self.message_count} messages in {files} file{'' if files == 1 else 's'}, "
+                f"{self.duration_ns / 1e9:.2f} s")
 
     def selects(self, topic: str) -> bool:
         """Whether writes to ``topic`` are recorded."""
@@ -267,10 +324,11 @@ class McapRecorder:
         if type(data) is not bytes:
             data = bytes(data)
         with self._deferred_signals(), self._lock:
-            self._record_locked(topic, type_name, data, log_time, qos)
-        return True
+            return self._record_locked(topic, type_name, data, log_time, qos)
 
-    def _record_locked(self, topic: str, type_name: str, data: bytes, log_time: int, qos: str) -> None:
+    def _record_locked(self, topic: str, type_name: str, data: bytes, log_time: int, qos: str) -> bool:
+        if self._failure is not None:
+            return False  # the recording ended at a write error (reported once)
         if self._closed:
             raise RuntimeError(f"the recorder of {self._path} is closed")
         known = self._types.get(topic)
@@ -286,18 +344,25 @@ class McapRecorder:
                 f"log time went backwards on {topic}: {log_time} ns after {self._last[0]} ns "
                 f"(on {self._last[1]}); log times must not decrease"
             )
-        f = self._file
-        if f is not None and f.messages and self._full(f, log_time, len(data)):
-            self._close_file()
-            f = None
-        if f is None:
-            self._open_next()
-            f = self._file
-        channel_id = f.channel(topic, type_name, self._definitions[type_name], known[1])
         count = self._counts.get(topic, 0)
-        f.add(channel_id, data, log_time, count % 2**32)
+        try:
+            f = self._file
+            if f is not None and f.messages and self._full(f, log_time, len(data)):
+                self._close_file()
+                f = None
+            if f is None:
+                self._open_next()
+                f = self._file
+            channel_id = f.channel(topic, type_name, self._definitions[type_name], known[1])
+            f.add(channel_id, data, log_time, count % 2**32)
+        except OSError as error:
+            self._fail(error, pending=1)  # the message was handed over: it may be in the last chunk
+            return False
         self._counts[topic] = count + 1
+        if self._first_log_time is None:
+            self._first_log_time = log_time
         self._last = (log_time, topic)
+        return True
 
     def _full(self, f: _OpenFile, log_time: int, data_bytes: int) -> bool:
         if self._max_duration_ns is not None and log_time - f.first_log_time > self._max_duration_ns:
@@ -308,14 +373,34 @@ class McapRecorder:
         return False
 
     def _open_next(self) -> None:
-        path = split_path(self._path, len(self._paths))
+        path = self._layout.file_path(len(self._paths))
+        self._opening = path  # what a RecordingFailed names if creating it fails
         self._file = _OpenFile(path, self._chunk_size, self._compression)
         self._paths.append(path)
 
     def _close_file(self) -> None:
-        f, self._file = self._file, None
+        f = self._file
         if f is not None:
             f.close()
+            self._file = None
+            self._finished.append((f.path, f.messages))
+
+    def _fail(self, error: OSError, pending: int = 0) -> None:
+        """End the recording at a write error: keep what is on disk, report once."""
+        f, self._file = self._file, None
+        safe = sum(n for path, n in self._finished if path.exists())  # a vanished folder took them along
+        if f is not None:
+            safe += f.flushed_messages if f.path.exists() else 0
+            f.abandon()
+        self._closed = True
+        atexit.unregister(self.close)
+        self._failure = RecordingFailed(
+            self._path, error.filename or (f.path if f is not None else self._opening), error, safe,
+            self.message_count + pending, unfinished=f is not None, folder=isinstance(self._layout, BagFolder),
+        )
+        if self._on_failure is None:
+            raise self._failure
+        self._on_failure(self._failure)
 
     @contextlib.contextmanager
     def _deferred_signals(self) -> Iterator[None]:
@@ -365,7 +450,10 @@ class McapRecorder:
         """Write the open chunk to the file now (a smaller chunk, nothing lost on a kill)."""
         with self._deferred_signals(), self._lock:
             if not self._closed and self._file is not None:
-                self._file.flush()
+                try:
+                    self._file.flush()
+                except OSError as error:
+                    self._fail(error)
 
     def close(self) -> None:
         """Finish the current file (summary, statistics, indexes). Idempotent."""
@@ -374,7 +462,11 @@ class McapRecorder:
                 return
             self._closed = True
             atexit.unregister(self.close)
-            self._close_file()
+            try:
+                self._close_file()
+                self._layout.finish(self._paths)
+            except OSError as error:
+                self._fail(error)
 
     def __enter__(self) -> "McapRecorder":
         return self

@@ -29,7 +29,9 @@ import re
 import sys
 from typing import Dict, List, Optional, Tuple
 
-__all__ = ["BUILTIN_DEFINITIONS", "SEPARATOR", "message_definition", "msg_text", "normalize_type", "dependencies"]
+__all__ = [
+    "BUILTIN_DEFINITIONS", "SEPARATOR", "dependencies", "message_definition", "msg_text", "normalize_type", "type_hash",
+]
 
 #: the line rosbag2 puts between the definitions of a schema
 SEPARATOR = "=" * 80
@@ -87,6 +89,34 @@ def msg_text(pkg: str, name: str) -> Optional[str]:
             with open(path, encoding="utf-8") as f:
                 return f.read()
     return BUILTIN_DEFINITIONS.get(f"{pkg}/{name}")
+
+
+@functools.lru_cache(maxsize=None)
+def type_hash(type_name: str) -> str:
+    """The type's RIHS01 hash, as rosbag2 stores it in ``metadata.yaml``; empty if not installed.
+
+    ROS 2 (since Iron) installs ``share/<pkg>/msg/<Name>.json`` beside the
+    ``.msg`` with the type's description and hash; the built-in definitions
+    (types without a wheel) have none.
+    """
+    import json
+
+    try:
+        pkg, name = normalize_type(type_name)
+    except ValueError:
+        return ""
+    for share in _share_dirs(pkg):
+        path = os.path.join(share, "msg", f"{name}.json")
+        if os.path.isfile(path):
+            try:
+                with open(path, encoding="utf-8") as f:
+                    hashes = json.load(f).get("type_hashes", [])
+            except (OSError, ValueError, AttributeError):
+                return ""
+            for entry in hashes:
+                if isinstance(entry, dict) and entry.get("type_name") == f"{pkg}/msg/{name}":
+                    return str(entry.get("hash_string", ""))
+    return ""
 
 
 def _field_type(line: str) -> Optional[str]:
