@@ -140,7 +140,10 @@ def test_record_path_rules(tmp_path):
     assert "is a symlink" in validate("record_path", str(link))
     (tmp_path / "d.mcap").mkdir()
     assert "is a directory" in validate("record_path", str(tmp_path / "d.mcap"))
-    for bad in ("run.txt", str(tmp_path) + "/", ".mcap", "run\0.mcap"):
+    assert validate("record_path", str(tmp_path / "bag")) is None  # a bag folder
+    (tmp_path / "notes").write_text("not a bag")
+    assert "is a file" in validate("record_path", str(tmp_path / "notes"))
+    for bad in ("/", ".", "..", ".mcap", "run\0.mcap"):
         assert "record_path" in validate("record_path", bad), bad
 
 

@@ -231,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
                          epilog=SIM_PARAMS.help())
     sim.add_argument("--config", default=None, help="ROS parameter file (e.g. config/simple_spread.yaml)")
     sim.add_argument("--scenario", default=None, help="scenario name (overrides the config)")
-    sim.add_argument("--record", default=None, help="record an MCAP bag to this .mcap path")
+    sim.add_argument("--record", default=None, help="record a bag: NAME.mcap (one MCAP file) or NAME (a rosbag2 bag folder)")
     sim.add_argument("-p", "--param", action="append", help="extra node parameter name:=value (repeatable)")
     sim.set_defaults(func=cmd_sim)
     from vmas_ros.rostools.cli import add_rostool_parsers

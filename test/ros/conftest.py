@@ -206,6 +206,9 @@ def sim_argv(params: Dict[str, object]) -> List[str]:
 class SimProcess:
     """One ``sim_node`` process; stdout and stderr go to files under ``log_dir``."""
 
+    #: run in the child before the node starts (e.g. to set a resource limit); None: nothing
+    preexec: Optional[Callable[[], None]] = None
+
     def __init__(self, ros: Optional[Ros], params: Dict[str, object], log_dir: Path, label: str) -> None:
         self.ros, self.params = ros, dict(params)
         log_dir.mkdir(parents=True, exist_ok=True)
@@ -216,7 +219,7 @@ class SimProcess:
         self.started = time.monotonic()
         self.proc = subprocess.Popen(
             self.argv(self.params), cwd=REPO, env=sim_env(),
-            stdin=subprocess.DEVNULL, stdout=self._stdout, stderr=self._stderr,
+            stdin=subprocess.DEVNULL, stdout=self._stdout, stderr=self._stderr, preexec_fn=self.preexec,
         )
         self.returncode: Optional[int] = None
 

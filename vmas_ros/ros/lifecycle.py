@@ -1,4 +1,4 @@
-"""How our nodes start and stop: refused parameters exit 2, a failed step exits 3, signals exit 0.
+"""How our nodes start and stop: refused parameters exit 2, a failed step 3, a failed bag 4, signals 0.
 
 sim_node and policy_node share this so that both behave the same for users,
 launch files and supervisors (systemd, a launch ``on_exit`` handler), which
@@ -10,6 +10,9 @@ can tell the three apart by the exit code alone:
   crashed or produced NaN) prints the cause's traceback, then one line saying
   what failed, and exits with code 3 (:data:`EXIT_FAULT`): the node stops
   rather than publish garbage, and its bag is still finished;
+* a ``RecordingStopped`` (sim_node with ``record_on_error: stop`` whose bag
+  could not be written: disk full, read-only, vanished) prints one line and
+  exits with code 4 (:data:`EXIT_RECORDING`);
 * SIGINT/SIGTERM (KeyboardInterrupt or an external shutdown) exit with 0; a
   signal before the node is built (during the imports) too, when the entry
   point installed ``startup.guard`` (the ``sim_node``/``policy_node`` programs do).
@@ -36,6 +39,8 @@ from vmas_ros.ros import startup
 EXIT_CONFIG = 2
 #: exit code for a node stopped by a SimulationFault (a crashed scenario or policy)
 EXIT_FAULT = 3
+#: exit code for a node stopped because its bag could not be written (record_on_error: stop)
+EXIT_RECORDING = 4
 
 
 class ConfigError(ValueError):
@@ -48,6 +53,10 @@ class SimulationFault(RuntimeError):
     The message is meant for the user and says what failed, at which step and
     what was (not) published; the original exception, if any, is ``__cause__``.
     """
+
+
+class RecordingStopped(RuntimeError):
+    """Writing the bag failed and the node was asked to stop then; the message says what failed."""
 
 
 def _shut_down() -> None:
@@ -85,6 +94,9 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
             traceback.print_exception(error.__cause__, file=sys.stderr)
         print(f"{name}: stopped: {error}", file=sys.stderr)
         code = EXIT_FAULT
+    except RecordingStopped as error:
+        print(f"{name}: stopped: {error}", file=sys.stderr)
+        code = EXIT_RECORDING
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 0
     except Exception:
@@ -99,5 +111,5 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
             node.destroy_node()
         _shut_down()
     if code == EXIT_FAULT and node is not None and getattr(node, "recorder", None) is not None:
-        print(f"{name}: the bag {node.recorder.paths[-1]} is closed and readable", file=sys.stderr)
+        print(f"{name}: the bag {node.recorder.bag} is closed and readable", file=sys.stderr)
     return code

@@ -15,6 +15,7 @@ import yaml
 from vmas_ros.ros.param_table import Param, ParamTable
 
 CONTROL_MODES = ("zero", "heuristic", "policy")
+RECORD_ON_ERROR = ("continue", "stop")
 DEVICES = ("cpu", "cuda", "auto")
 #: upper bounds that catch garbage (1e12 envs, a period rclpy cannot hold in int64 ns) before it runs
 MAX_NUM_ENVS = 10_000_000
@@ -94,21 +95,24 @@ def _adapter(value: str, current) -> Optional[str]:
 def _check_record_path(value: str) -> Optional[str]:
     """Why the bag cannot go to ``value``: the bag and its split parts stay exactly where the user pointed.
 
-    The recorder writes ``value`` and ``<stem>_<n>.mcap`` beside it, creating
-    missing parent directories. A symlink at ``value`` (even a dangling one)
-    would send the write somewhere else, so it is refused, as is a path whose
-    last part is not a ``.mcap`` file name.
+    ``NAME.mcap`` is a single file (split parts ``NAME_<n>.mcap`` beside it),
+    any other name a rosbag2 bag folder; missing parent directories are
+    created. A symlink at ``value`` (even a dangling one) would send the write
+    somewhere else, so it is refused. Whether a bag is already there is the
+    recorder's to say (see ``record_overwrite``).
     """
     import os
 
     if "\0" in value:
         return f"record_path must not contain NUL bytes, got {value!r}"
-    if not value.endswith(".mcap") or os.path.basename(value) in ("", ".mcap"):
-        return f"record_path must be a file name ending in .mcap, got {value!r}"
-    if os.path.islink(value):
-        return f"record_path {value!r} is a symlink (to {os.readlink(value)!r}); give the real path"
-    if os.path.isdir(value):
-        return f"record_path {value!r} is a directory; give a file name ending in .mcap"
+    if os.path.basename(value.rstrip("/")) in ("", ".", "..", ".mcap"):
+        return f"record_path must name a file NAME.mcap or a bag folder NAME, got {value!r}"
+    if os.path.islink(value.rstrip("/")):
+        return f"record_path {value!r} is a symlink (to {os.readlink(value.rstrip('/'))!r}); give the real path"
+    if value.endswith(".mcap") and os.path.isdir(value):
+        return f"record_path {value!r} is a directory; name a bag folder without .mcap, or a new .mcap file"
+    if not value.endswith(".mcap") and os.path.isfile(value.rstrip("/")):
+        return f"record_path {value!r} is a file; a bag folder needs a name that is free or a folder"
     return None
 
 
@@ -156,8 +160,12 @@ SIM_PARAMS = ParamTable("sim_node", [
           note="(0: off)"),
     Param("foxglove_host", "127.0.0.1", "address the Foxglove server listens on",
           check=_not_empty("foxglove_host", " (127.0.0.1 keeps the server private to this machine)")),
-    Param("record_path", "", "record an MCAP bag of everything published and received to this .mcap; empty: off",
-          check=_record_path),
+    Param("record_path", "", "record everything published and received: NAME.mcap (one MCAP file) or NAME "
+          "(a rosbag2 bag folder); empty: off", check=_record_path),
+    Param("record_overwrite", False, "replace an existing bag at record_path (a folder only if it holds nothing "
+          "but a bag)"),
+    Param("record_on_error", "continue", "when writing the bag fails (disk full, read-only, vanished): continue "
+          "without recording, or stop the node with exit code 4", choices=RECORD_ON_ERROR),
     Param("record_topics", "", "comma-separated topics to record; empty: all"),
     Param("record_max_mb", 0.0, "split the bag past this size", minimum=0.0, note="(0: no split)"),
     Param("record_max_duration_s", 0.0, "split the bag past this span of simulated time", minimum=0.0,

@@ -37,7 +37,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 import vmas_ros
 from vmas_ros.ros import convert
 from vmas_ros.ros.command import CommandGate, command_to_action
-from vmas_ros.ros.lifecycle import ConfigError
+from vmas_ros.ros.lifecycle import ConfigError, RecordingStopped
 from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.params import SIM_PARAMS, SimParams, resolve_device, run_checked
 from vmas_ros.ros.policy_io import AgentTopics, policy_actions, start_policy
@@ -208,21 +208,41 @@ class SimNode(StepLoop, Node):
         return bridge
 
     def _start_recorder(self):
-        """An MCAP bag of everything published and received, when ``record_path`` is set."""
+        """A bag of everything published and received, when ``record_path`` is set."""
         p = self.params
+        self._recording_failure = None
         if not p.record_path:
             return None
-        from vmas_ros.record import McapRecorder
+        from vmas_ros.record import McapRecorder, RecordingExists
 
         try:
             recorder = McapRecorder(
-                p.record_path, topics=p.recorded_topics(),
+                p.record_path, topics=p.recorded_topics(), overwrite=p.record_overwrite,
                 max_bytes=int(p.record_max_mb * 1e6) or None, max_duration_s=p.record_max_duration_s or None,
+                on_failure=self._on_recording_failure,
             )
+        except RecordingExists as error:
+            raise ConfigError(f"record_path: {error.path} exists ({error.what}); choose another path or set "
+                              f"record_overwrite:=true to replace it") from None
         except (OSError, ValueError) as error:
             raise ConfigError(f"cannot record to {p.record_path!r}: {error}") from None
-        self.get_logger().info(f"recording to {p.record_path} (MCAP, rosbag2-compatible)")
+        kind = "MCAP file" if p.record_path.endswith(".mcap") else "rosbag2 bag folder"
+        self.get_logger().info(f"recording to {recorder.bag} ({kind})")
         return recorder
+
+    def _on_recording_failure(self, failure) -> None:
+        # any thread that wrote (the step, a subscription, Foxglove's): the step acts on it
+        self._recording_failure = failure
+
+    def _check_recording(self) -> None:
+        """After a write error: go on without the bag, or stop (``record_on_error``); said in one line."""
+        failure, self._recording_failure = self._recording_failure, None
+        if failure is None:
+            return
+        self.recorder = None
+        if self.params.record_on_error == "stop":
+            raise RecordingStopped(f"{failure} (record_on_error: stop)")
+        self.get_logger().error(f"{failure}; the simulation goes on without recording (record_on_error: continue)")
 
     def _record(self, topic: str, message, qos: str = "reliable", stamp_ns: Optional[int] = None) -> None:
         """Write ``message`` to the bag, stamped ``stamp_ns`` (default: now in simulation time)."""
@@ -246,8 +266,13 @@ class SimNode(StepLoop, Node):
     def destroy_node(self):
         if getattr(self, "foxglove", None) is not None:
             self.foxglove.close()
-        if getattr(self, "recorder", None) is not None:
-            self.recorder.close()  # the bag is finished and readable after SIGINT/SIGTERM
+        recorder = getattr(self, "recorder", None)
+        if recorder is not None:
+            recorder.close()  # the bag is finished and readable after SIGINT/SIGTERM
+            if recorder.failure is None:
+                self.get_logger().info(f"bag closed: {recorder.describe()}")
+            else:  # finishing it failed (disk full, the folder vanished): said once
+                self.get_logger().error(str(recorder.failure))
         return super().destroy_node()
 
     # ------------------------------------------------------------------ commands

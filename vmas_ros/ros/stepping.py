@@ -104,6 +104,7 @@ class StepLoop:
             self._emit(step)
         except Exception as error:
             self._raise_fault("publish", error, step.steps)
+        self._check_recording()  # a bag that could not be written: no fault of the step (record_on_error)
 
     def _raise_fault(self, stage: str, error: Exception, step: int) -> None:
         """Re-raise ``error`` as the SimulationFault of ``step`` (as it is while a signal shuts the node down:
@@ -136,6 +137,7 @@ class StepLoop:
     def _publish(self) -> None:
         """Publish the current state (at start-up and after a reset: no step in between)."""
         self._emit(self._gather())
+        self._check_recording()
 
     def _gather(self) -> ComputedStep:
         """The published env's snapshot of the current state (refused if not finite), with what goes with it."""
