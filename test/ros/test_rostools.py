@@ -123,6 +123,29 @@ def test_drive_refuses_bad_arguments(args, message):
     assert done.returncode == 2 and message in done.stderr, done.stderr
 
 
+def test_tools_reach_a_namespaced_node(ros, sim_log_dir):
+    """A node started with ``-r __ns:=/swarm1``: absolute names and ``--namespace`` both reach it."""
+    from test.ros.fault_tools import FaultProcess
+
+    sim = FaultProcess(ros, {"scenario_kwargs": {"n_agents": 1}, "control": "zero"}, sim_log_dir, "swarm1")
+    try:
+        sim.wait_ready()
+        poses = ros.collect(PoseStamped, "/swarm1/agent_0/pose")
+        fresh(ros, poses)
+        start = _position(poses)
+        done = vmas_ros_cli("drive", "/swarm1/agent_0", "--vx", "0.3", "--seconds", "1")
+        assert done.returncode == 0 and "Twists to /swarm1/agent_0/cmd_vel (1 subscriber)" in done.stdout, done
+        ros.spin_for(0.5)
+        assert 0.24 <= math.dist(start, _position(poses)) <= 0.36
+        poses.destroy()
+        echo = vmas_ros_cli("echo", "agent_0/odom", "--namespace", "/swarm1", "--count", "1")
+        assert echo.returncode == 0 and "child_frame_id: 'agent_0/base_link'" in echo.stdout, echo
+        missing = vmas_ros_cli("drive", "agent_9", "--namespace", "/swarm1", "--vx", "0.1", "--seconds", "0.1")
+        assert missing.returncode == 1 and "nothing subscribes to /swarm1/agent_9/cmd_vel" in missing.stderr, missing
+    finally:
+        assert sim.stop() == 0, sim.describe()
+
+
 def test_echo_reads_a_relative_name(realtime):
     done = vmas_ros_cli("echo", "agent_0/pose", "--count", "2")
     assert done.returncode == 0, done.stderr
