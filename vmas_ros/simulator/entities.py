@@ -18,7 +18,13 @@ from vmas_ros.simulator.shapes import Shape, Sphere
 from vmas_ros.simulator.state import Action, AgentState, EntityState, _Batched
 from vmas_ros.simulator.utils import Color, Observable
 
-__all__ = ["EntityState", "AgentState", "Action", "Entity", "Landmark", "Agent"]
+__all__ = ["EntityState", "AgentState", "Action", "Entity", "Landmark", "Agent", "collide_with_all"]
+
+
+def collide_with_all(other: "Entity") -> bool:
+    """The default collision filter: collide with every entity. The step recognises it (by identity)
+    to know that every pair of a group of spheres may touch (see tables.SphereGroup)."""
+    return True
 
 
 def _table_property(name: str, doc: str):
@@ -55,7 +61,7 @@ class Entity(_Batched, Observable):
         linear_friction: Optional[float] = None,
         angular_friction: Optional[float] = None,
         gravity=None,
-        collision_filter: Callable[["Entity"], bool] = lambda _: True,
+        collision_filter: Optional[Callable[["Entity"], bool]] = None,
     ) -> None:
         _Batched.__init__(self)
         Observable.__init__(self)
@@ -79,7 +85,7 @@ class Entity(_Batched, Observable):
         self._linear_friction = linear_friction
         self._angular_friction = angular_friction
         self._gravity = gravity
-        self._collision_filter = collision_filter
+        self._collision_filter = collide_with_all if collision_filter is None else collision_filter
         self._state = self._make_state()
         self._goal = None
         self._render: Optional[Tensor] = None
@@ -239,7 +245,7 @@ class Landmark(Entity):
         linear_friction: Optional[float] = None,
         angular_friction: Optional[float] = None,
         gravity=None,
-        collision_filter: Callable[[Entity], bool] = lambda _: True,
+        collision_filter: Optional[Callable[[Entity], bool]] = None,
     ) -> None:
         super().__init__(
             name, movable, rotatable, collide, density, mass, shape, v_range, max_speed,
@@ -281,7 +287,7 @@ class Agent(Entity):
         linear_friction: Optional[float] = None,
         angular_friction: Optional[float] = None,
         gravity=None,
-        collision_filter: Callable[[Entity], bool] = lambda _: True,
+        collision_filter: Optional[Callable[[Entity], bool]] = None,
         render_action: bool = False,
         dynamics=None,
         action_size: Optional[int] = None,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from functools import cached_property
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Dict, List, Optional, Tuple
+from typing import TYPE_CHECKING, Dict, List, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
@@ -88,6 +88,40 @@ class PairTable(_Incidence):
 
 
 @dataclass
+class SphereGroup:
+    """Spheres of which every pair may touch, whose contacts a grid finds (``physics.collision.sphere_grid``)
+    instead of a pair list: a swarm of ``M`` spheres has ``M^2 / 2`` pairs, most of them far apart.
+
+    Members collide with everything (the default filter), are movable and in no
+    joint. ``cell`` is the grid's cell side: the largest contact distance of two
+    members with a margin for float rounding of the cell coordinates.
+    ``capacity`` is the candidate slots per grid row and sphere; ``needed``
+    (0-d, on the device) the longest row run a step has met.
+    """
+
+    members: Tensor  # [M] long entity indices
+    radius: Tensor  # [M]
+    cell: float
+    capacity: int
+    needed: Tensor
+
+    kind = ("sphere", "sphere")
+
+    def grow(self) -> bool:
+        """Whether a step met more candidates than ``capacity`` (a host read of ``needed``); if so the
+        capacity is raised to the next power of two that holds them, and the step must be computed again."""
+        needed = int(self.needed)
+        if needed <= self.capacity:
+            return False
+        self.capacity = 1 << (needed - 1).bit_length()
+        return True
+
+    @property
+    def size(self) -> int:
+        return int(self.members.numel())
+
+
+@dataclass
 class JointTable(_Incidence):
     """Static part of all joint constraints; fixed rotations are read per step."""
 
@@ -136,6 +170,8 @@ class WorldTables:
     agent_rotatable: Tensor  # [A, 1, 1] bool
     pairs: List[PairTable]
     joints: JointTable | None
+    #: large groups of spheres whose contacts a grid finds; their pairs are in no PairTable
+    sphere_groups: List[SphereGroup] = field(default_factory=list)
     #: which limits exist at all: a step skips the clamps no entity needs (clamping to inf is the identity)
     limits_speed: bool = True  # some finite max_speed
     limits_velocity: bool = True  # some finite v_range
@@ -174,19 +210,60 @@ def _shape_params(prefix: str, shape) -> Dict[str, float]:
     raise TypeError(f"unsupported shape {shape!r}")
 
 
-def build_pairs(world, entities) -> List[PairTable]:
-    """Bucket every eligible entity pair by the collision kernel that handles it."""
+def _grid_members(world, entities) -> List[int]:
+    """Entities a :class:`SphereGroup` can hold (spheres that collide with everything, movable, in no
+    joint), if there are enough of them for the grid to pay off; else none."""
+    from vmas_ros.simulator.entities import collide_with_all
+    from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES
+
+    minimum = GRID_MIN_SPHERES if world.sphere_grid == "auto" else (0 if world.sphere_grid == "on" else None)
+    if minimum is None:
+        return []
+    jointed = {name for pair in world._joint_constraints for name in pair}
+    members = [i for i, e in enumerate(entities)
+               if isinstance(e.shape, Sphere) and e._collide and e._collision_filter is collide_with_all
+               and e.movable and e.name not in jointed]
+    return members if len(members) >= max(minimum, 2) else []
+
+
+def build_sphere_group(world, entities, members: List[int]) -> List[SphereGroup]:
+    if not members:
+        return []
+    from vmas_ros.simulator.thresholds import GRID_START_CAPACITY
+
+    radii = [entities[i].shape.radius for i in members]
+    device = world.device
+    return [SphereGroup(
+        members=torch.tensor(members, device=device, dtype=torch.long),
+        radius=torch.tensor(radii, device=device, dtype=torch.float32),
+        cell=2.0 * max(radii) * 1.01,  # the margin keeps touching spheres in adjacent cells despite float rounding
+        capacity=GRID_START_CAPACITY,
+        needed=torch.zeros((), device=device, dtype=torch.long),
+    )]
+
+
+def build_pairs(world, entities, grouped: Sequence[int] = ()) -> List[PairTable]:
+    """Bucket every eligible entity pair by the collision kernel that handles it; pairs of two
+    ``grouped`` entities are left to their :class:`SphereGroup`."""
     buckets: Dict[Tuple[str, str], list] = {kind: [] for kind in PAIR_KINDS}
-    for i, a in enumerate(entities):
-        for j in range(i + 1, len(entities)):
-            b = entities[j]
-            if not _pair_collides(world, a, b):
-                continue
-            ia, ib = (i, j) if _KIND_ORDER[a.shape.kind] <= _KIND_ORDER[b.shape.kind] else (j, i)
-            kind = (entities[ia].shape.kind, entities[ib].shape.kind)
-            if kind not in buckets:
-                raise TypeError(f"no collision kernel for shapes {kind}")
-            buckets[kind].append((ia, ib))
+    in_group = set(grouped)
+    others = [i for i in range(len(entities)) if i not in in_group]
+    found = []
+    if not in_group:
+        found = [(i, j) for i in range(len(entities)) for j in range(i + 1, len(entities))]
+    else:  # only pairs with a member outside the group: |others| x N, not N^2
+        for i in others:
+            found += [(min(i, j), max(i, j)) for j in range(len(entities)) if j != i and (j in in_group or j > i)]
+        found.sort()
+    for i, j in found:
+        a, b = entities[i], entities[j]
+        if not _pair_collides(world, a, b):
+            continue
+        ia, ib = (i, j) if _KIND_ORDER[a.shape.kind] <= _KIND_ORDER[b.shape.kind] else (j, i)
+        kind = (entities[ia].shape.kind, entities[ib].shape.kind)
+        if kind not in buckets:
+            raise TypeError(f"no collision kernel for shapes {kind}")
+        buckets[kind].append((ia, ib))
     tables = []
     device = world.device
     for kind, pairs in buckets.items():
@@ -261,6 +338,7 @@ def build_tables(world) -> WorldTables:
     lin = [_value_or(e.linear_friction, world_lin) for e in entities]
     ang = [_value_or(e.angular_friction, world_ang) for e in entities]
     gravity_force, has_gravity = _gravity_force(world, entities)
+    grouped = _grid_members(world, entities)
     inf = math.inf
     return WorldTables(
         n_entities=len(entities),
@@ -283,8 +361,9 @@ def build_tables(world) -> WorldTables:
         agent_t_range=_column([_value_or(a.t_range, inf) for a in agents], device),
         agent_movable=_column([bool(a.movable) for a in agents], device, torch.bool),
         agent_rotatable=_column([bool(a.rotatable) for a in agents], device, torch.bool),
-        pairs=build_pairs(world, entities),
+        pairs=build_pairs(world, entities, grouped),
         joints=build_joints(world, entities),
+        sphere_groups=build_sphere_group(world, entities, grouped),
         limits_speed=any(e.max_speed is not None for e in entities),
         limits_velocity=any(e.v_range is not None for e in entities),
         limits_force=any(a.max_f is not None or a.f_range is not None for a in agents),

@@ -15,9 +15,20 @@ __all__ = [
     "SCATTER_TRANSPOSE_BELOW", "GEMM_SCATTER_MAX_CELLS", "GEMM_SCATTER_MIN_PAIRS", "SMALL_BATCH_ELEMENTS",
     "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
     "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
+    "GRID_MIN_SPHERES", "GRID_START_CAPACITY",
 ]
 
 # --- physics step ---------------------------------------------------------------------------
+
+#: From this many spheres that may all touch each other, their contacts are found through a grid
+#: (``physics.collision.sphere_grid``) instead of a list of every pair: the pair list's cost grows
+#: with the square of the count, the grid's about linearly. Below, the pair list's few large ops
+#: beat the grid's sort and searches.
+GRID_MIN_SPHERES = 128
+
+#: Candidate slots per sphere and grid row the grid starts with; a step that meets more is computed
+#: again with more (never a lost contact). Sparse swarms rarely have more than a few per row.
+GRID_START_CAPACITY = 4
 
 #: Below this many envs, pair forces are scattered along dim 0 of a transposed view: CPU
 #: ``index_add_`` along an inner dim pays per index, which dominates when each index moves

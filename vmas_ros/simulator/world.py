@@ -25,7 +25,8 @@ from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import physics, rays
 from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
-from vmas_ros.simulator.physics.actions import assemble_actions, hold_agents, limit_actions
+from vmas_ros.simulator.physics.actions import agents_action_input
+from vmas_ros.simulator.physics.joints import fixed_rotations
 from vmas_ros.simulator.physics.pipeline import advance
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.tables import PAIR_KINDS, WorldTables, build_tables
@@ -45,7 +46,8 @@ def _step_layout(state, tables, params: physics.StepParams, actions, fixed_rotat
     form of the action input, whether joints have target angles, and which state kernels ride along."""
     return (params.dt, params.substeps, params.collision_force, params.joint_force, params.torque_constraint_force,
             params.contact_margin, params.x_semidim, params.y_semidim, params.broad_phase,
-            isinstance(actions, tuple), fixed_rotation is None, tuple(id(kernel) for kernel in kernels))
+            isinstance(actions, tuple), fixed_rotation is None, tuple(id(kernel) for kernel in kernels),
+            tuple(group.capacity for group in tables.sphere_groups))
 
 
 def _no_entity(_: Entity) -> bool:
@@ -105,6 +107,7 @@ class World:
         self._state = WorldState(batch_dim, self._device)
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
+        self._sphere_grid = "auto"
         #: the step as one function: advance, or a torch.compile'd copy of it (compile_physics)
         self._physics_step = advance
         self._compile_mode: Optional[str] = None
@@ -126,6 +129,19 @@ class World:
         if value not in ("batch", "env"):
             raise ValueError(f"broad_phase must be 'batch' or 'env', got {value!r}")
         self._broad_phase = value
+
+    @property
+    def sphere_grid(self) -> str:
+        """Contacts among spheres that may all touch: ``"auto"`` (a grid from thresholds.GRID_MIN_SPHERES
+        of them), ``"on"`` (a grid) or ``"off"`` (every pair). Same contacts, forces to float rounding."""
+        return self._sphere_grid
+
+    @sphere_grid.setter
+    def sphere_grid(self, value: str) -> None:
+        if value not in ("auto", "on", "off"):
+            raise ValueError(f"sphere_grid must be 'auto', 'on' or 'off', got {value!r}")
+        self._sphere_grid = value
+        self._invalidate_tables()
 
     def compile_physics(self, enabled: bool = True, mode: Optional[str] = None) -> None:
         """Run the physics step through ``torch.compile`` (off by default).
@@ -295,10 +311,12 @@ class World:
         # state kernels ride along in compiled steps only: eagerly, computing them when they are asked for
         # costs the same calls and keeps the step's own peak memory lower
         kernels = self._state.kernels if self.physics_compiled else ()
-        if self._physics_step is advance:
-            new, outputs = advance(state, tables, params, actions, fixed_rotation, kernels)
-        else:  # keyed on the tables object: rebuilt whenever an entity or one of its properties changes
-            new, outputs = self._physics_step(tables, state, tables, params, actions, fixed_rotation, kernels)
+        new, outputs = self._advance(state, tables, params, actions, fixed_rotation, kernels)
+        # a grid that met more candidates than it had room for: grow it and compute the step again
+        # from the same state (its actions are assembled anew: the step may have written into them)
+        while any([group.grow() for group in tables.sphere_groups]):  # every group grows, not the first only
+            actions = self._action_input(tables, state.q)
+            new, outputs = self._advance(state, tables, params, actions, fixed_rotation, kernels)
         del actions, state
         # the step's output becomes every entity's state: entities fetch their views when read
         self._state.adopt_step(new, outputs, rebuilt)
@@ -307,41 +325,18 @@ class World:
                 if not agent.silent and agent.action.c is not None:
                     agent.state._c = agent.action.c
 
+    def _advance(self, state, tables, params, actions, fixed_rotation, kernels):
+        if self._physics_step is advance:
+            return advance(state, tables, params, actions, fixed_rotation, kernels)
+        return self._physics_step(tables, state, tables, params, actions, fixed_rotation, kernels)  # keyed on tables
+
     def _action_input(self, tables: WorldTables, q: Tensor):
-        """The step's action input ``[3, N, B]`` (:func:`~vmas_ros.simulator.physics.actions.assemble_actions`),
-        or, when the physics is compiled and no agent's action needs clamping or holding, the agents'
-        (forces, torques) lists for the compiled step to assemble in its own graph."""
-        agents = self._agents
-        if tables.n_agents == 0:
-            return q.new_zeros(q.shape)
-        if tables.fixed_agents is None:  # some agent cannot move or turn: its action is ignored there
-            tables.fixed_agents = not all(a.movable and a.rotatable for a in agents)
-        limited = tables.limits_force or tables.limits_torque
-        forces, torques = [a.state._force for a in agents], [a.state._torque for a in agents]
-        if not (limited or tables.fixed_agents):
-            return (forces, torques) if self.physics_compiled else assemble_actions(q, tables, forces, torques)
-        force, torque = torch.stack(forces), torch.stack(torques)
-        if limited:
-            force, torque = limit_actions(force, torque, tables)
-            for agent, f, t in zip(agents, force.unbind(0), torque.unbind(0)):  # seen by scenarios, as in VMAS
-                if agent.movable:
-                    agent.state._force = f
-                if agent.rotatable:
-                    agent.state._torque = t
-        if tables.fixed_agents:
-            force, torque = hold_agents(force, torque, tables)
-        return assemble_actions(q, tables, force, torque)
+        """The step's action input (:func:`~vmas_ros.simulator.physics.actions.agents_action_input`)."""
+        return agents_action_input(self._agents, tables, q, self.physics_compiled)
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""
-        values = []
-        for c in tables.joints.constraints:
-            value = c.fixed_rotation
-            if isinstance(value, Tensor):
-                values.append(value.reshape(-1, 1).to(self._device).expand(self._batch_dim, 1))
-            else:
-                values.append(torch.full((self._batch_dim, 1), float(value), device=self._device))
-        return torch.stack(values)
+        return fixed_rotations(tables.joints.constraints, self._batch_dim, self._device)
 
     # ------------------------------------------------------ batched state (World.state)
     def stacked_state(self, field: str = "pos") -> Tensor:

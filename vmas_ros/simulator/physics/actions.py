@@ -19,7 +19,7 @@ from vmas_ros.simulator.physics.integrator import differentiable
 from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.tables import WorldTables
 
-__all__ = ["assemble_actions", "hold_agents", "limit_actions"]
+__all__ = ["agents_action_input", "assemble_actions", "hold_agents", "limit_actions"]
 
 
 def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
@@ -66,3 +66,29 @@ def hold_agents(force: Tensor, torque: Tensor, tables: WorldTables) -> Tuple[Ten
     """``force`` ``[A, B, 2]`` zeroed for agents that cannot move, ``torque`` ``[A, B, 1]`` for those that
     cannot turn (VMAS ignores their actions there)."""
     return (torch.where(tables.agent_movable, force, 0.0), torch.where(tables.agent_rotatable, torque, 0.0))
+
+
+def agents_action_input(agents, tables: WorldTables, q: Tensor, compiled: bool):
+    """The step's action input ``[3, N, B]`` (:func:`assemble_actions`) from the ``agents``' action forces
+    and torques, clamped to their limits (written back to the agents, as VMAS does) and held where an
+    agent cannot move or turn; or, for a ``compiled`` step with nothing to clamp or hold, the agents'
+    (forces, torques) lists for the compiled step to assemble in its own graph."""
+    if tables.n_agents == 0:
+        return q.new_zeros(q.shape)
+    if tables.fixed_agents is None:  # some agent cannot move or turn: its action is ignored there
+        tables.fixed_agents = not all(a.movable and a.rotatable for a in agents)
+    limited = tables.limits_force or tables.limits_torque
+    forces, torques = [a.state._force for a in agents], [a.state._torque for a in agents]
+    if not (limited or tables.fixed_agents):
+        return (forces, torques) if compiled else assemble_actions(q, tables, forces, torques)
+    force, torque = torch.stack(forces), torch.stack(torques)
+    if limited:
+        force, torque = limit_actions(force, torque, tables)
+        for agent, f, t in zip(agents, force.unbind(0), torque.unbind(0)):  # seen by scenarios, as in VMAS
+            if agent.movable:
+                agent.state._force = f
+            if agent.rotatable:
+                agent.state._torque = t
+    if tables.fixed_agents:
+        force, torque = hold_agents(force, torque, tables)
+    return assemble_actions(q, tables, force, torque)

@@ -19,7 +19,7 @@ from vmas_ros.simulator.physics.scatter import add_pairs
 from vmas_ros.simulator.physics.types import StepParams
 from vmas_ros.simulator.tables import JointTable
 
-__all__ = ["add_joint_forces", "joint_forces"]
+__all__ = ["add_joint_forces", "fixed_rotations", "joint_forces"]
 
 
 def add_joint_forces(force: Tensor, joints: Optional[JointTable], q: Tensor, fixed_rotation: Optional[Tensor],
@@ -63,3 +63,16 @@ def joint_forces(
     lock = params.torque_constraint_force * delta.sign() * (torch.exp(magnitude) - 1)
     lock = lock * mask_ge(magnitude, 1e-9)
     return fx, fy, t_a - lock, t_b + lock
+
+
+def fixed_rotations(constraints, batch_dim: int, device) -> Tensor:
+    """``[J, B, 1]``: each joint's target relative angle (a number, or a tensor when the joint follows
+    its line), the step's ``fixed_rotation`` input."""
+    values = []
+    for c in constraints:
+        value = c.fixed_rotation
+        if isinstance(value, Tensor):
+            values.append(value.reshape(-1, 1).to(device).expand(batch_dim, 1))
+        else:
+            values.append(torch.full((batch_dim, 1), float(value), device=device))
+    return torch.stack(values)

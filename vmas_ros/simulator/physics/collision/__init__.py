@@ -2,7 +2,8 @@
 
 The world's pair tables (:mod:`vmas_ros.simulator.tables`) group every
 colliding entity pair by the kinds of their shapes, sorted by name, once per
-layout. A step runs each group's kernel on all its pairs and envs at once and
+layout; a large group of spheres (a swarm) has no pair list but a grid that
+finds its contacts each step (:mod:`.sphere_grid`). A step runs each group's kernel on all its pairs and envs at once and
 adds the result onto the entities' forces (:mod:`..scatter`). Every kernel has
 the same signature and returns :class:`PairForces`.
 """
@@ -16,6 +17,7 @@ from torch import Tensor
 from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.physics.collision import box_box, box_line, box_sphere, line_line, line_sphere, sphere_sphere
 from vmas_ros.simulator.physics.collision.contact import PairForces
+from vmas_ros.simulator.physics.collision.sphere_grid import add_group_contact_forces
 from vmas_ros.simulator.physics.scatter import add_pairs, add_pairs_opposite
 from vmas_ros.simulator.physics.types import BodyState, StepParams
 from vmas_ros.simulator.tables import PairTable, WorldTables
@@ -47,6 +49,8 @@ def add_contact_forces(force: Tensor, tables: WorldTables, q: Tensor, params: St
             add_pairs_opposite(target, pair, pushed.on_a)
         else:
             add_pairs(target, pair, pushed.on_a, pushed.on_b)
+    for group in tables.sphere_groups:
+        add_group_contact_forces(force, group, q, params)
 
 
 def pair_forces(pair: PairTable, state: BodyState, params: StepParams) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
