@@ -369,8 +369,8 @@ def test_modes_plan_the_sides_and_compile_physics_is_an_alias():
 def test_a_failing_compiled_side_does_not_lose_the_others(monkeypatch, capsys):
     real = suite._spheres_case
 
-    def spheres(side, n_agents, num_envs, steps, seed, compiled=False):
-        case = real(side, n_agents, num_envs, steps, seed, False)  # eager: no compiling in this test
+    def spheres(side, n_agents, num_envs, steps, seed, compiled=False, **layout):
+        case = real(side, n_agents, num_envs, steps, seed, False, **layout)  # eager: no compiling in this test
         if not compiled:
             return case
 

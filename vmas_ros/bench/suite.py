@@ -51,6 +51,7 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from vmas_ros.bench import mpe as _mpe
 from vmas_ros.bench.common import COMPILED_SIDE
 from vmas_ros.bench.report import plot_available
+from vmas_ros.bench.suite_cases import SPHERE_SPACING, SWARM_SPACING
 from vmas_ros.bench.suite_cases import env_cases as _env_cases
 from vmas_ros.bench.suite_cases import memory_run as _memory_run
 from vmas_ros.bench.suite_cases import spheres_case as _spheres_case
@@ -84,6 +85,7 @@ class Workload:
     kwargs: Mapping[str, object] = field(default_factory=dict)
     n_agents: Optional[int] = None  # spheres only
     peer: str = PEER_VMAS
+    spacing: float = SPHERE_SPACING  # spheres: they start in a square of side spacing * sqrt(n_agents)
 
 
 WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
@@ -96,6 +98,8 @@ WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
     Workload("spheres_100", "spheres", None, 32, n_agents=100),
     Workload("spread_60", "env", "simple_spread", 32, kwargs={"n_agents": 60}),  # VMAS: as many landmarks
     Workload("scaling_agents", "agents_curve", None, 1),
+    # a swarm: spheres of radius 0.05 spread over a square of side 0.5 * sqrt(N), about 3% of it covered
+    *(Workload(f"swarm_{n}", "spheres", None, 1, n_agents=n, spacing=SWARM_SPACING) for n in (1_000, 10_000, 100_000)),
     Workload("scaling_envs", "envs_curve", "simple_spread", 1),
     Workload("memory_30k", "memory", "simple_spread", 30_000),
     Workload("mpe_1k", "mpe", "simple_spread", 1_000, peer=PEER_MPE),
@@ -232,7 +236,8 @@ def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, pe
                 skipped = {side: "scenario not available" for side in ours + [w.peer]}
             elif peer_reason:
                 skipped[w.peer] = peer_reason
-            elif w.kind == "agents_curve" and max_peer_agents is not None and n_agents > max_peer_agents:
+            elif (w.kind in ("agents_curve", "spheres") and max_peer_agents is not None
+                  and n_agents > max_peer_agents):
                 skipped[w.peer] = (f"omitted: above --max-peer-agents {max_peer_agents} "
                                    f"(upstream is O(pairs) with host syncs; not extrapolated)")
             sides = [s for s in ours + [w.peer] if s not in skipped]
@@ -318,7 +323,8 @@ def _measure(unit: Unit, run_id: str, steps: int, repeats: int, warmup: int, thr
             cases[PEER_MPE] = _mpe._mpe_case(measured[PEER_MPE], steps, seed)
         unit.n_agents = _mpe.N_AGENTS
     elif w.kind in ("spheres", "agents_curve"):
-        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed, side in unit.compiled_sides)
+        cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed, side in unit.compiled_sides,
+                                     spacing=w.spacing)
                  for side in unit.sides}
     else:
         cases = _env_cases(unit, steps, seed)

@@ -27,11 +27,14 @@ from vmas_ros.bench.timing import Case
 if TYPE_CHECKING:  # only for the annotations: suite imports this module
     from vmas_ros.bench.suite import Unit
 
-__all__ = ["SPHERE_RADIUS", "SPHERE_SPACING", "library_of", "env_cases", "spheres_case", "memory_run"]
+__all__ = ["SPHERE_RADIUS", "SPHERE_SPACING", "SWARM_SPACING", "library_of", "env_cases", "spheres_case",
+           "memory_run"]
 
 SPHERE_RADIUS = 0.05
 #: spheres start uniform in a square of side SPHERE_SPACING * sqrt(n): constant density, ~80% covered, so many overlap
 SPHERE_SPACING = 0.1
+#: a swarm's spacing: a square of side 0.5 * sqrt(n), about 3% covered
+SWARM_SPACING = 0.5
 
 
 def library_of(side: str) -> str:
@@ -80,8 +83,10 @@ def env_cases(unit: "Unit", steps: int, seed: int) -> Dict[str, Case]:
     return cases
 
 
-def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int, compiled: bool = False) -> Case:
-    """``n_agents`` overlapping spheres built with the side's own World/Agent/Sphere; times World.step."""
+def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int, compiled: bool = False,
+                 spacing: float = SPHERE_SPACING) -> Case:
+    """``n_agents`` spheres built with the side's own World/Agent/Sphere, uniform in a square of side
+    ``spacing * sqrt(n_agents)`` (overlapping at the default spacing); times World.step."""
     core = importlib.import_module(f"{library_of(side)}.simulator.core")
     world = core.World(batch_dim=num_envs, device="cpu")
     if compiled and library_of(side) == "vmas_ros":
@@ -90,7 +95,7 @@ def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int,
         world.add_agent(core.Agent(name=f"sphere_{i}", shape=core.Sphere(radius=SPHERE_RADIUS)))
     world.reset(None)
     generator = torch.Generator().manual_seed(seed)
-    pos = (torch.rand(n_agents, num_envs, 2, generator=generator) - 0.5) * (SPHERE_SPACING * math.sqrt(n_agents))
+    pos = (torch.rand(n_agents, num_envs, 2, generator=generator) - 0.5) * (spacing * math.sqrt(n_agents))
     force = torch.rand(n_agents, num_envs, 2, generator=generator) * 2 - 1
 
     def setup():  # the same start and action forces before every run, on every side
