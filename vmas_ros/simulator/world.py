@@ -101,6 +101,7 @@ class World:
         self._gravity = torch.tensor(gravity, device=self._device, dtype=torch.float32)
         self._agents: List[Agent] = []
         self._landmarks: List[Landmark] = []
+        self._names: set = set()  # every entity's name: adding one checks it in O(1)
         self._joint_constraints: Dict[frozenset, object] = {}
         self._tables: Optional[WorldTables] = None
         #: every entity's pos/vel/rot/ang_vel, and everything derived from them (see world_state.py)
@@ -183,7 +184,10 @@ class World:
         self._check_new_name(agent)
         agent._attach(self)
         self._agents.append(agent)
-        self._entities_changed()
+        # agents come last: appending one moves no other entity's row (a swarm adds thousands)
+        if not self._state.append_entity(agent):
+            self._state.set_entities(self.entities)
+        self._invalidate_tables()
 
     def add_landmark(self, landmark: Landmark) -> None:
         self._check_new_name(landmark)
@@ -207,8 +211,9 @@ class World:
         self._invalidate_tables()
 
     def _check_new_name(self, entity: Entity) -> None:
-        if any(e.name == entity.name for e in self.entities):
+        if entity.name in self._names:
             raise ValueError(f"an entity named {entity.name!r} is already in the world")
+        self._names.add(entity.name)
 
     def _invalidate_tables(self) -> None:
         self._tables = None

@@ -133,6 +133,18 @@ class WorldState:
         for slot, entity in enumerate(self._entities):
             entity.state._join(self, slot)
 
+    def append_entity(self, entity: "Entity") -> bool:
+        """Add ``entity`` in the last row without touching the others, when no state is adopted (every
+        entity holds its own fields, or reads zero after :meth:`reset_all`); False when the layout must
+        be rebuilt with :meth:`set_entities`."""
+        if self._views is not None:
+            return False
+        self._entities.append(entity)
+        entity.state._join(self, len(self._entities) - 1)
+        self._stacks, self._xy_splits = {}, {}
+        self.dirty = True
+        return True
+
     def reset_all(self) -> None:
         """Make every entity's pos/vel/rot/ang_vel zero in every env (``World.reset(None)``), allocating
         nothing until the zeros are read.
