@@ -23,8 +23,8 @@ __all__ = [
 #: From this many spheres that may all touch each other, their contacts are found through a grid
 #: (``physics.collision.sphere_grid``) instead of a list of every pair: the pair list's cost grows
 #: with the square of the count, the grid's about linearly. Below, the pair list's few large ops
-#: beat the grid's sort and searches.
-GRID_MIN_SPHERES = 128
+#: beat the grid's sort and searches (docs/bench/swarm.md has both sides of the switch).
+GRID_MIN_SPHERES = 256
 
 #: Candidate slots per sphere and grid row the grid starts with; a step that meets more is computed
 #: again with more (never a lost contact). Sparse swarms rarely have more than a few per row.
