@@ -233,10 +233,11 @@ def test_wrong_number_of_actions(count):
         env.step([torch.zeros(N, 2)] * count)
 
 
-def test_actions_must_be_a_list_or_dict():
+def test_actions_must_be_a_list_a_dict_or_one_stacked_tensor():
     env = make()
-    with pytest.raises(ValueError, match="list"):
-        env.step(torch.zeros(3, N, 2))
+    with pytest.raises(ValueError, match=r"a list \(one per agent\), a dict by agent name or one stacked "
+                                         r"\[n_agents, num_envs, size\] tensor, got int"):
+        env.step(3)
 
 
 # ------------------------------------------------------------ rejected steps

@@ -40,6 +40,33 @@ def to_action_tensor(action, agent_name: str, num_envs: int, size: int, device: 
     return action if action.device == device else action.to(device)
 
 
+def to_stacked_actions(actions: Tensor, n_agents: int, num_envs: int, sizes: List[int], device: torch.device,
+                       continuous: bool) -> Tensor:
+    """Validate the stacked form of every agent's action, ``[n_agents, num_envs, size]``, and return it.
+
+    One tensor for all agents costs one check instead of one per agent (a
+    swarm has thousands). It needs every agent to take the same action size;
+    a discrete action of size 1 may also come as ``[n_agents, num_envs]``.
+    """
+    size = sizes[0] if sizes else 0
+    if any(s != size for s in sizes):
+        raise ValueError(f"a stacked action tensor needs every agent to take the same action size, got {sizes}; "
+                         f"pass a list with one tensor per agent instead")
+    if actions.device != device:
+        raise ValueError(f"the stacked actions are on device {actions.device}, but the env runs on {device}; "
+                         f"move them with .to({str(device)!r})")
+    if actions.dim() == 2 and size == 1 and tuple(actions.shape) == (n_agents, num_envs):
+        actions = actions.unsqueeze(-1)
+    if tuple(actions.shape) != (n_agents, num_envs, size):
+        raise ValueError(f"stacked actions have shape {tuple(actions.shape)}, expected "
+                         f"(n_agents, num_envs, action size) = ({n_agents}, {num_envs}, {size})")
+    if actions.dtype == torch.bool or actions.is_complex():
+        raise ValueError(f"stacked actions have dtype {actions.dtype}; expected a real number type")
+    if not continuous and actions.dtype.is_floating_point and not bool(torch.all(actions == actions.round())):
+        raise ValueError("stacked discrete actions have non-integer values")
+    return actions
+
+
 def check_finite_and_range(actions: List[Tensor], lows: List[Tensor], highs: List[Tensor], names: List[str], what: str) -> None:
     """Raise ValueError for NaN/inf or out-of-range entries; one host read for all agents."""
     if not actions:  # every agent is scripted (e.g. football with both teams on AI)

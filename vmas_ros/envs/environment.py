@@ -172,8 +172,12 @@ class Environment:
         return result[0] if result and len(result) == 1 else result
 
     # --------------------------------------------------------------------- step
-    def step(self, actions: Union[Sequence, Dict]):
+    def step(self, actions: Union[Sequence, Dict, Tensor]):
         """Apply one action per agent to every env and advance the world by one step.
+
+        ``actions``: a list with one ``[num_envs, size]`` tensor per agent, a dict
+        of them by agent name (as VMAS takes), or all of them stacked in one
+        ``[n_agents, num_envs, size]`` tensor (validated at once; for many agents).
 
         Returns ``obs, rews, dones, infos`` (or ``obs, rews, terminated, truncated,
         infos`` with ``terminated_truncated=True``).
@@ -189,7 +193,9 @@ class Environment:
             self.steps = self.steps + 1
             return self._collect(True, True, True, True)
 
-    def _ordered_actions(self, actions) -> list:
+    def _ordered_actions(self, actions):
+        if isinstance(actions, Tensor):  # every agent's action stacked: checked in _set_actions
+            return actions
         if isinstance(actions, dict):
             names = [a.name for a in self.agents]
             missing = [n for n in names if n not in actions]
@@ -198,7 +204,8 @@ class Environment:
                 raise ValueError(f"action dict must have exactly the agents {names}; missing {missing}, unknown {unknown}")
             return [actions[n] for n in names]
         if not isinstance(actions, (list, tuple)):
-            raise ValueError(f"actions must be a list (one per agent) or a dict by agent name, got {type(actions).__name__}")
+            raise ValueError(f"actions must be a list (one per agent), a dict by agent name or one stacked "
+                             f"[n_agents, num_envs, size] tensor, got {type(actions).__name__}")
         if len(actions) != self.n_agents:
             raise ValueError(f"expected actions for {self.n_agents} agents, got {len(actions)}")
         return list(actions)
@@ -219,21 +226,33 @@ class Environment:
             ]
         return plans
 
-    def _set_actions(self, actions: list) -> None:
-        tensors = []
-        for agent, action, plan in zip(self.agents, actions, self._action_plans()):
-            action = act.to_action_tensor(action, agent.name, self.num_envs, plan[0], self.device, self.continuous_actions)
-            if not self.grad_enabled and action.requires_grad:
-                action = action.detach()
-            tensors.append(action)
+    def _set_actions(self, actions) -> None:
+        """``actions``: a list with one per agent, or every agent's stacked ``[n_agents, num_envs, size]``."""
+        stacked = None
+        if isinstance(actions, Tensor):
+            stacked = act.to_stacked_actions(actions, self.n_agents, self.num_envs,
+                                             [plan[0] for plan in self._action_plans()], self.device,
+                                             self.continuous_actions)
+            if not self.grad_enabled and stacked.requires_grad:
+                stacked = stacked.detach()
+            tensors = list(stacked.unbind(0))
+        else:
+            tensors = []
+            for agent, action, plan in zip(self.agents, actions, self._action_plans()):
+                action = act.to_action_tensor(action, agent.name, self.num_envs, plan[0], self.device,
+                                              self.continuous_actions)
+                if not self.grad_enabled and action.requires_grad:
+                    action = action.detach()
+                tensors.append(action)
         if not tensors:  # every agent is scripted
             return
         lows, highs = self._stacked_bounds()
         kind = "continuous" if self.continuous_actions else "discrete"
-        same_shape = all(t.shape == tensors[0].shape for t in tensors)
+        same_shape = stacked is not None or all(t.shape == tensors[0].shape for t in tensors)
         if same_shape:
             # one fused check (and one host read) for all agents; the slow per-agent path only names the culprit
-            stacked = torch.stack(tensors)
+            if stacked is None:
+                stacked = torch.stack(tensors)
             if stacked.dtype != torch.float32:
                 stacked = stacked.float()
             low, high, low_ad, high_ad = self._stacked_bound_tensors()
