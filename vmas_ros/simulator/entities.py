@@ -61,7 +61,7 @@ class Entity(_Batched, Observable):
         linear_friction: Optional[float] = None,
         angular_friction: Optional[float] = None,
         gravity=None,
-        collision_filter: Optional[Callable[["Entity"], bool]] = None,
+        collision_filter: Callable[["Entity"], bool] = collide_with_all,
     ) -> None:
         _Batched.__init__(self)
         Observable.__init__(self)
@@ -245,7 +245,7 @@ class Landmark(Entity):
         linear_friction: Optional[float] = None,
         angular_friction: Optional[float] = None,
         gravity=None,
-        collision_filter: Optional[Callable[[Entity], bool]] = None,
+        collision_filter: Callable[[Entity], bool] = collide_with_all,
     ) -> None:
         super().__init__(
             name, movable, rotatable, collide, density, mass, shape, v_range, max_speed,
@@ -287,7 +287,7 @@ class Agent(Entity):
         linear_friction: Optional[float] = None,
         angular_friction: Optional[float] = None,
         gravity=None,
-        collision_filter: Optional[Callable[[Entity], bool]] = None,
+        collision_filter: Callable[[Entity], bool] = collide_with_all,
         render_action: bool = False,
         dynamics=None,
         action_size: Optional[int] = None,
