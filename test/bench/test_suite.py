@@ -140,6 +140,16 @@ def test_peer_above_max_peer_agents_is_omitted_not_extrapolated(run):
     assert "VMAS not run at 4 agents" in (out / "suite.md").read_text()
 
 
+def test_swarm_workloads_are_sparse_sphere_worlds_without_the_peer_above_the_cap():
+    for n in (1_000, 10_000, 100_000):
+        workload = suite.WORKLOADS[f"swarm_{n}"]
+        assert (workload.kind, workload.num_envs, workload.n_agents, workload.spacing) == ("spheres", 1, n, 0.5)
+    (unit,) = suite.plan_suite(["swarm_1000"], peers=["vmas"], max_peer_agents=100)
+    assert unit.sides == ["vmas_ros"] and "max-peer-agents 100" in unit.skipped["vmas"]
+    (small,) = suite.plan_suite(["swarm_1000"], peers=["vmas"], max_peer_agents=1_000)
+    assert "vmas" not in small.skipped or "not installed" in small.skipped["vmas"]
+
+
 def test_unavailable_scenario_is_reported_as_skipped(run):
     _, out, document = run
     rows = _rows(document, "discovery_1k")
