@@ -121,5 +121,20 @@ def as_pairs(vectors: Tensor) -> Tensor:
     strided copy of 8-byte pairs runs far faster than the same copy of
     4-byte floats with a trailing dim of 2, and moves the same bits. Needs a
     contiguous last dim and even strides/offset (true of the state stacks).
+    Complex pairs (from :func:`complex_pairs`) are returned as they are.
     """
-    return torch.view_as_complex(vectors)
+    return vectors if vectors.is_complex() else torch.view_as_complex(vectors)
+
+
+def complex_pairs(x: Tensor, y: Tensor) -> Tensor:
+    """Components ``x``, ``y`` as ``(x, y)`` pairs to read back with :func:`as_pairs`.
+
+    Eagerly, complex numbers straight from ``torch.complex``: a tensor that is
+    not a view of another costs less per indexing and per op than viewing
+    ``[..., 2]`` vectors as complex numbers. Under ``torch.compile``, ``[..., 2]``
+    vectors (:func:`join_xy`): the compiler fuses a stack into its loops and
+    would leave complex numbers to ATen.
+    """
+    if torch.compiler.is_compiling():
+        return join_xy(x, y)
+    return torch.complex(x, y)

@@ -25,7 +25,7 @@ import torch
 from vmas_ros.scenarios.common import greedy_first_match, read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
-from vmas_ros.simulator.layout import as_pairs, join_xy
+from vmas_ros.simulator.layout import as_pairs, complex_pairs
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.thresholds import FEW_ENVS
 from vmas_ros.simulator.utils import Color
@@ -124,8 +124,7 @@ class Scenario(BaseScenario):
         for all agents; the only other temporary is the other agents' gathered rows.
         """
         _, positions, velocities = self.outputs()
-        if not positions.is_complex():  # computed in a compiled step, as [..., 2] vectors
-            positions, velocities = as_pairs(positions), as_pairs(velocities)
+        positions, velocities = as_pairs(positions), as_pairs(velocities)
         n_landmarks = self._n_landmarks
         own = positions[n_landmarks + index]
         observation = torch.empty(own.shape[0], len(self._seen_rows[index]) + 2, dtype=positions.dtype,
@@ -149,8 +148,8 @@ class Scenario(BaseScenario):
 
 
 def _many_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below_squared: torch.Tensor) -> tuple:
-    """Rewards ``[B]``, positions ``[N, B]`` and agents' velocities ``[A, B]`` as complex (x, y) pairs (as
-    ``[..., 2]`` vectors in a compiled step) from the planar state.
+    """Rewards ``[B]``, positions ``[N, B]`` and agents' velocities ``[A, B]`` as (x, y) pairs
+    (:func:`~vmas_ros.simulator.layout.complex_pairs`) from the planar state.
 
     On planar rows ``[N, B]``: squared distances over contiguous blocks
     vectorise. The nearest agent to each landmark is found on squared
@@ -163,11 +162,7 @@ def _many_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overl
     coverage = _squared_gaps(ax, ay, lx, ly).amin(dim=0).clamp_min(1e-30).sqrt().sum(dim=0)  # [A, L, B] -> [B]
     overlaps = (_squared_gaps(ax, ay, ax, ay) < overlap_below_squared).sum(dim=(0, 1))
     rewards = -n_agents * coverage - overlaps.float()
-    if torch.compiler.is_compiling():  # the compiler fuses a stack; complex numbers it would leave to ATen
-        return rewards, join_xy(x, y), join_xy(v[0, n_landmarks:], v[1, n_landmarks:])
-    # eagerly, (x, y) pairs as complex numbers straight away: a tensor that is not a view of another
-    # costs less per indexing and per op in the per-agent observations that read it
-    return rewards, torch.complex(x, y), torch.complex(v[0, n_landmarks:], v[1, n_landmarks:])
+    return rewards, complex_pairs(x, y), complex_pairs(v[0, n_landmarks:], v[1, n_landmarks:])
 
 
 def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below: torch.Tensor,
