@@ -144,9 +144,7 @@ def recover_file(path_in: Path, path_out: Path, compression: str = "zstd") -> Di
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path_out.name}.", suffix=".partial", dir=path_out.parent)
     os.close(fd)
     tmp = Path(tmp_name)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; OUT gets the mode of any new file
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it private; OUT gets the mode of any new file
     try:
         report = recover(path_in, tmp, compression=compression)
         report.update(_log_time_span(tmp))
@@ -174,18 +172,18 @@ def recover_folder(folder_in: Path, folder_out: Path, compression: str = "zstd")
             target = tmp / path.name
             if _finished(path):
                 _link_or_copy(path, target)
-                part = {"complete": True, "error": None, "messages": _message_count(path),
-                        "bytes_used": path.stat().st_size, "bytes_total": path.stat().st_size}
+                size = path.stat().st_size
+                part = {"complete": True, "error": None, "bytes_used": size, "bytes_total": size}
             else:
                 part = recover(path, target, compression=compression)
                 report["complete"] = False
                 report["error"] = report["error"] or f"{path.name}: {part['error']}"
             report["files"][path.name] = "complete" if part["complete"] else part["error"]
-            report["messages"] += part["messages"]
             report["bytes_used"] += part["bytes_used"]
             report["bytes_total"] += part["bytes_total"]
         info = metadata_from_files(folder_files(tmp))
         write_metadata(tmp, info)
+        report["messages"] = info["message_count"]  # the files' own summaries count them
         for entry in info["topics_with_message_count"]:
             report["topics"][entry["topic_metadata"]["name"]] = entry["message_count"]
         report["channels"] = len(report["topics"])
@@ -201,6 +199,7 @@ def recover_folder(folder_in: Path, folder_out: Path, compression: str = "zstd")
 
 
 def _umask() -> int:
+    """The process's umask (reading it means setting it; it is set back at once)."""
     umask = os.umask(0)
     os.umask(umask)
     return umask
@@ -215,14 +214,6 @@ def _finished(path: Path) -> bool:
             return make_reader(stream).get_summary() is not None
     except Exception:  # mcap raises several kinds for a cut-off file
         return False
-
-
-def _message_count(path: Path) -> int:
-    from mcap.reader import make_reader
-
-    with open(path, "rb") as stream:
-        statistics = make_reader(stream).get_summary().statistics
-    return 0 if statistics is None else statistics.message_count
 
 
 def _link_or_copy(source: Path, target: Path) -> None:

@@ -9,6 +9,7 @@ when entities are added or a property changes, never inside the step.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from functools import cached_property
 from dataclasses import dataclass, field
@@ -248,13 +249,11 @@ def build_pairs(world, entities, grouped: Sequence[int] = ()) -> List[PairTable]
     buckets: Dict[Tuple[str, str], list] = {kind: [] for kind in PAIR_KINDS}
     in_group = set(grouped)
     others = [i for i in range(len(entities)) if i not in in_group]
-    found = []
     if not in_group:
-        found = [(i, j) for i in range(len(entities)) for j in range(i + 1, len(entities))]
+        found = itertools.combinations(range(len(entities)), 2)
     else:  # only pairs with a member outside the group: |others| x N, not N^2
-        for i in others:
-            found += [(min(i, j), max(i, j)) for j in range(len(entities)) if j != i and (j in in_group or j > i)]
-        found.sort()
+        found = sorted((min(i, j), max(i, j)) for i in others for j in range(len(entities))
+                       if j != i and (j in in_group or j > i))
     for i, j in found:
         a, b = entities[i], entities[j]
         if not _pair_collides(world, a, b):
