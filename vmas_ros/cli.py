@@ -21,6 +21,7 @@ Subcommands:
     bag     ``bag info``: what a bag holds; ``bag play``: publish it again with its timing
     soak    long runs: memory growth, NaN/inf, missed steps (engine, or sim_node with bag + Foxglove)
     bag-recover  rebuild a finished MCAP bag from one whose recorder was killed
+    dds-clean  remove Fast DDS shared memory that a killed process left half made
 """
 from __future__ import annotations
 

@@ -20,11 +20,17 @@ can tell the three apart by the exit code alone:
 In every case the node is destroyed before rclpy shuts down, which is where
 sim_node closes its bag: the bag is complete whichever way the node stops
 (except SIGKILL; see ``vmas-ros bag-recover``).
+
+Before DDS starts, the node removes the Fast DDS shared-memory segments that a
+killed process left half made (:mod:`vmas_ros.rostools.dds_clean`): Fast DDS
+would wait for them forever. If start-up still hangs inside DDS, a message
+names what to do.
 """
 from __future__ import annotations
 
 import signal
 import sys
+import threading
 import traceback
 from typing import Callable, List, Optional
 
@@ -34,6 +40,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from vmas_ros.ros import startup
+from vmas_ros.rostools.dds_clean import remove_stuck_segments, stuck_segments
 
 #: exit code for parameters refused at start
 EXIT_CONFIG = 2
@@ -73,8 +80,28 @@ def _shut_down() -> None:
             raise
 
 
+#: seconds of start-up after which a node looks again for Fast DDS segments that would hang it
+STARTUP_DDS_CHECK_S = 10.0
+
+
+def _clear_stuck_dds(name: str) -> None:
+    for path in remove_stuck_segments():
+        print(f"{name}: removed {path}, Fast DDS shared memory that a killed process left half made "
+              "(it would have made this node wait forever)", file=sys.stderr, flush=True)
+
+
+def _warn_if_dds_stuck(name: str) -> None:
+    """Runs on a timer thread while the node is being built: the main thread may be inside DDS."""
+    stuck = stuck_segments()
+    if stuck:
+        print(f"{name}: still starting after {STARTUP_DDS_CHECK_S:g} s, and {', '.join(map(str, stuck))} "
+              "(Fast DDS shared memory that a killed process left half made) may be what it waits for. "
+              "Stop this node, run `vmas-ros dds-clean`, and start it again.", file=sys.stderr, flush=True)
+
+
 def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]] = None) -> int:
     """Init rclpy, build the node with ``make_node`` and spin it until shutdown; returns the exit code."""
+    _clear_stuck_dds(name)
     rclpy.init(args=argv if argv is not None else sys.argv)
     node = None
     code = 0
@@ -84,7 +111,13 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
         # prints a traceback from the half-built executor's __del__)
         executor = SingleThreadedExecutor()
         startup.hand_over()  # a signal from here on stops the node (KeyboardInterrupt), see startup.py
-        node = make_node()
+        watch = threading.Timer(STARTUP_DDS_CHECK_S, _warn_if_dds_stuck, args=(name,))
+        watch.daemon = True
+        watch.start()
+        try:
+            node = make_node()
+        finally:
+            watch.cancel()
         rclpy.spin(node, executor=executor)
     except ConfigError as error:
         print(f"{name}: refused parameters: {error}", file=sys.stderr)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Callable
 
 from vmas_ros.rostools.graph import ToolError
@@ -93,9 +94,17 @@ def _bag(args: argparse.Namespace) -> None:
         play(args.path, rate=args.rate, topics=args.topics, delay=args.delay, progress=not args.quiet)
 
 
+def _dds_clean(args: argparse.Namespace) -> None:
+    from vmas_ros.rostools.dds_clean import clean
+
+    if args.min_age < 0:
+        raise ToolError(f"--min-age must be >= 0 seconds, got {args.min_age}", 2)
+    clean(args.dir, min_age_s=args.min_age, dry_run=args.dry_run)
+
+
 def add_rostool_parsers(sub) -> None:
-    """Add ``echo``, ``drive``, ``topics``, ``call``, ``param`` and ``bag`` to the ``vmas-ros``
-    subparsers ``sub``."""
+    """Add ``echo``, ``drive``, ``topics``, ``call``, ``param``, ``bag`` and ``dds-clean`` to the
+    ``vmas-ros`` subparsers ``sub``."""
     echo = sub.add_parser("echo", help="print messages of a topic (ros2 topic echo)",
                           description="Print messages of a topic, each followed by ---. With a full ROS install: "
                                       "ros2 topic echo TOPIC.")
@@ -160,3 +169,15 @@ def add_rostool_parsers(sub) -> None:
                           "subscribers to discover them (default 0.5)")
     bag.add_argument("--quiet", action="store_true", help="play: no progress bar")
     bag.set_defaults(func=_run("bag", _bag))
+    dds = sub.add_parser("dds-clean", help="remove Fast DDS shared memory that a killed process left half made",
+                         description="A ROS process killed while it set up Fast DDS's shared memory leaves a "
+                                     "segment under /dev/shm that makes every later node hang at start-up, with "
+                                     "no output. This removes such segments (ones still not ready after "
+                                     "--min-age seconds) and nothing else. With a full ROS install: "
+                                     "fastdds shm clean.")
+    dds.add_argument("--dry-run", action="store_true", help="list the stuck segments, remove nothing")
+    dds.add_argument("--min-age", type=float, default=2.0,
+                     help="seconds a segment must have stayed unready (default 2; setting one up takes "
+                          "microseconds)")
+    dds.add_argument("--dir", type=Path, default=Path("/dev/shm"), help="where Fast DDS keeps them (default /dev/shm)")
+    dds.set_defaults(func=_run("dds-clean", _dds_clean))
