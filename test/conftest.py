@@ -1,10 +1,14 @@
 """Shared fixtures for the vmas_ros test suite."""
 
+import faulthandler
 import os
 import random
+import sys
 
 import pytest
 import torch
+
+from vmas_ros.rostools.dds_clean import remove_stuck_segments
 
 
 def _available_devices():
@@ -24,11 +28,31 @@ def pytest_configure(config):
     # inherit the environment): no test ever talks to another host.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    # A ROS process that an earlier run (or a test) killed while it set up Fast DDS's
+    # shared memory leaves a segment every later node waits for forever, inside Fast
+    # DDS where no Python timeout reaches; test/ros/conftest.py sweeps again before
+    # every node it starts.
+    remove_stuck_segments()
     # One torch thread for the whole session: the tests step small batches, which run
     # fastest on one thread, and on a busy 2-core machine (CI, or sim_node subprocesses
     # beside the test process) two contended threads make tiny kernels such as
     # index_add take milliseconds instead of microseconds. Results do not depend on it.
     torch.set_num_threads(1)
+
+
+#: a test still running after this many seconds ends the whole run, with every
+#: thread's stack on stderr: pytest-timeout's limit (pytest.ini) raises in Python,
+#: which cannot stop a thread stuck inside native code
+HARD_LIMIT_S = 900
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    faulthandler.dump_traceback_later(HARD_LIMIT_S, exit=True, file=sys.__stderr__)
+    try:
+        yield
+    finally:
+        faulthandler.cancel_dump_traceback_later()
 
 
 @pytest.fixture(params=_available_devices())

@@ -27,6 +27,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from vmas_ros.rostools.dds_clean import remove_stuck_segments
+
 REPO = Path(__file__).resolve().parents[2]
 DISCOVERY_TIMEOUT = 20.0
 NODE = "/sim_node"
@@ -108,6 +110,7 @@ class Ros:
     """A test-side rclpy node in its own context, spun on demand."""
 
     def __init__(self) -> None:
+        remove_stuck_segments()  # as sim_env() does for child processes
         self.context = rclpy.Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(f"vmas_ros_test_{os.getpid()}", context=self.context)
@@ -186,6 +189,10 @@ def format_param(value) -> str:
 
 
 def sim_env() -> Dict[str, str]:
+    """The environment of a ROS process a test starts; first sweeps away Fast DDS segments that a
+    killed process left half made, which would hang the new process at start-up (every process
+    start in the tests builds its environment here)."""
+    remove_stuck_segments()
     env = dict(os.environ)
     env["RMW_IMPLEMENTATION"] = "rmw_fastrtps_cpp"
     env["PYTHONUNBUFFERED"] = "1"
@@ -343,6 +350,7 @@ def ros():
 @pytest.fixture(scope="module")
 def rclpy_context():
     """An rclpy context of the module's own, for nodes built in the test process (no signal handlers)."""
+    remove_stuck_segments()  # as sim_env() does for child processes
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     yield context
