@@ -8,7 +8,10 @@ wrong tensor fails where it is written, not deep inside a step.
 After a step, pos/vel/rot/ang_vel live in the world's
 :class:`~vmas_ros.simulator.world_state.WorldState` (``World.state``); an
 entity fetches a field from there the first time it is read (see that module
-for why), and holds a tensor of its own only for a field set since.
+for why), and holds a tensor of its own only for a field set since. An agent's
+action ``force``/``torque`` is a row of the world's
+:class:`~vmas_ros.simulator.action_block.ActionBlock`: setting it copies into
+the row.
 """
 from __future__ import annotations
 
@@ -17,6 +20,7 @@ from typing import Dict, List, Optional
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.action_block import ACTION_FIELDS, ActionBlock
 from vmas_ros.simulator.world_state import DETACHED, STORED_FIELDS, WorldState
 from vmas_ros.simulator.utils import TorchUtils
 
@@ -60,12 +64,12 @@ class _Batched:
         return value if value.device == self._device else value.to(self._device)
 
 
-def _state_tensor(name: str, width: int, doc: str):
-    """A validated [batch, width] tensor attribute of a state object."""
+def _action_tensor(name: str, width: int, doc: str):
+    """A validated [batch, width] action field of an agent state (kept in the world's action block)."""
     attr = "_" + name
 
     def fget(self):
-        return getattr(self, attr)
+        return self.__dict__[attr]
 
     def fset(self, value: Tensor) -> None:
         value = self._check_tensor(self._owner_name, name, value)
@@ -74,7 +78,7 @@ def _state_tensor(name: str, width: int, doc: str):
                 f"{self._owner_name}.{name} must have shape [{self._batch_dim}, {width}], "
                 f"got {tuple(value.shape)}"
             )
-        setattr(self, attr, value)
+        self._set_action(name, value)
 
     return property(fget, fset, doc=doc)
 
@@ -209,6 +213,10 @@ class AgentState(EntityState):
     def __init__(self, owner_name: str = "agent") -> None:
         super().__init__(owner_name)
         self._c = self._force = self._torque = None
+        #: the world's action block and this agent's row there (None: not in a world yet)
+        self._actions: Optional[ActionBlock] = None
+        self._action_slot = -1
+        self._force_is_row = self._torque_is_row = False
 
     # c's width depends on the world, so it has its own setter
     @property
@@ -219,15 +227,49 @@ class AgentState(EntityState):
     def c(self, value: Tensor) -> None:
         self._c = self._check_tensor(self._owner_name, "c", value)
 
-    force = _state_tensor("force", 2, "action force [batch, 2] for the next step")
-    torque = _state_tensor("torque", 1, "action torque [batch, 1] for the next step")
+    force = _action_tensor("force", 2, "action force [batch, 2] for the next step (a row of the world's actions)")
+    torque = _action_tensor("torque", 1, "action torque [batch, 1] for the next step (a row of the world's actions)")
 
     def _spawn(self, dim_c: int, dim_p: int) -> None:
         super()._spawn(dim_c, dim_p)
         if dim_c > 0:
             self._c = torch.zeros(self._batch_dim, dim_c, device=self._device)
-        self._force = torch.zeros(self._batch_dim, dim_p, device=self._device)
-        self._torque = torch.zeros(self._batch_dim, 1, device=self._device)
+        self._set_action("force", torch.zeros(self._batch_dim, dim_p, device=self._device))
+        self._set_action("torque", torch.zeros(self._batch_dim, 1, device=self._device))
+
+    # The methods below are the action block's side of the protocol (action_block.py, World.add_agent).
+
+    def _join_actions(self, block: ActionBlock) -> None:
+        """Keep ``force``/``torque`` in a row of ``block`` from now on, starting from their current values."""
+        force, torque = self._force, self._torque
+        self._actions, self._action_slot = block, block.append(self)
+        self._force_is_row = self._torque_is_row = False
+        self._set_action("force", force)
+        self._set_action("torque", torque)
+
+    def _set_action(self, name: str, value: Tensor) -> None:
+        """Copy ``value`` into this agent's row; keep it instead when it needs gradients (the block turns loose)."""
+        block, fields = self._actions, self.__dict__
+        if block is None or value.requires_grad:
+            fields["_" + name], fields["_" + name + "_is_row"] = value, False
+            if block is not None:
+                block.loose = True
+            return
+        row = fields["_" + name] if fields["_" + name + "_is_row"] else block.row(name, self._action_slot)
+        row.copy_(value)
+        fields["_" + name], fields["_" + name + "_is_row"] = row, True
+
+    def _move_action_rows(self, block: ActionBlock, slot: int) -> None:
+        """The block's tensors were replaced (grown, moved): hold views of the new rows."""
+        for name in ACTION_FIELDS:
+            if self.__dict__["_" + name + "_is_row"]:
+                self.__dict__["_" + name] = block.row(name, slot)
+
+    def _assign(self, name: str, value: Tensor) -> None:
+        if name in ACTION_FIELDS:
+            self._set_action(name, value)
+        else:
+            super()._assign(name, value)
 
 
 def _per_component(value, size: int, name: str) -> List[float]:

@@ -25,6 +25,7 @@ from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import physics, rays
 from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
+from vmas_ros.simulator.action_block import ActionBlock
 from vmas_ros.simulator.physics.actions import agents_action_input
 from vmas_ros.simulator.physics.joints import fixed_rotations
 from vmas_ros.simulator.physics.pipeline import advance
@@ -106,6 +107,8 @@ class World:
         self._tables: Optional[WorldTables] = None
         #: every entity's pos/vel/rot/ang_vel, and everything derived from them (see world_state.py)
         self._state = WorldState(batch_dim, self._device)
+        #: every agent's action force and torque, one row each (see action_block.py)
+        self._actions = ActionBlock(batch_dim, self._dim_p, self._device)
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
         self._sphere_grid = "auto"
@@ -183,6 +186,7 @@ class World:
         """Only way to add an agent; ``entities`` lists landmarks first, then agents (as VMAS)."""
         self._check_new_name(agent)
         agent._attach(self)
+        agent.state._join_actions(self._actions)
         self._agents.append(agent)
         # agents come last: appending one moves no other entity's row (a swarm adds thousands)
         if not self._state.append_entity(agent):
@@ -247,6 +251,7 @@ class World:
         self._device = torch.device(device)
         self._gravity = self._gravity.to(self._device)
         self._state.to(self._device)  # every entity owns its fields again, to move them
+        self._actions.to(self._device)  # the agents' action rows move with it
         for e in self.entities:
             e.to(self._device)
         self._invalidate_tables()
@@ -337,7 +342,7 @@ class World:
 
     def _action_input(self, tables: WorldTables, q: Tensor):
         """The step's action input (:func:`~vmas_ros.simulator.physics.actions.agents_action_input`)."""
-        return agents_action_input(self._agents, tables, q, self.physics_compiled)
+        return agents_action_input(self._agents, self._actions, tables, q, self.physics_compiled)
 
     def _joint_fixed_rotations(self, tables: WorldTables) -> Tensor:
         """[J, B, 1] target relative angles; tensors when a joint follows its line."""

@@ -1,7 +1,8 @@
 """The physics step's action input: every entity's (fx, fy, torque) as one ``[3, N, B]`` tensor.
 
-Agents' dynamics write a force ``[B, 2]`` and a torque ``[B, 1]`` each; the
-step adds them to the entities' rows (landmarks get zeros). At a few envs the
+Agents' dynamics write a force ``[B, 2]`` and a torque ``[B, 1]`` each, into their
+rows of the world's action block (:mod:`vmas_ros.simulator.action_block`); the
+step copies the block into the entities' rows (landmarks get zeros). At a few envs the
 number of calls matters more than the arithmetic, so the copy is chosen by
 size (:mod:`vmas_ros.simulator.thresholds`). Before that, an agent's action is clamped to its
 limits and zeroed in the coordinates it cannot move or turn in, as VMAS does.
@@ -13,6 +14,7 @@ from typing import Tuple
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.action_block import ActionBlock
 from vmas_ros.simulator.layout import split_xy_into, stack_into
 from vmas_ros.simulator.physics.forces import clamp_norm
 from vmas_ros.simulator.physics.integrator import differentiable
@@ -68,27 +70,48 @@ def hold_agents(force: Tensor, torque: Tensor, tables: WorldTables) -> Tuple[Ten
     return (torch.where(tables.agent_movable, force, 0.0), torch.where(tables.agent_rotatable, torque, 0.0))
 
 
-def agents_action_input(agents, tables: WorldTables, q: Tensor, compiled: bool):
-    """The step's action input ``[3, N, B]`` (:func:`assemble_actions`) from the ``agents``' action forces
-    and torques, clamped to their limits (written back to the agents, as VMAS does) and held where an
-    agent cannot move or turn; or, for a ``compiled`` step with nothing to clamp or hold, the agents'
-    (forces, torques) lists for the compiled step to assemble in its own graph."""
+def agents_action_input(agents, block: ActionBlock, tables: WorldTables, q: Tensor, compiled: bool):
+    """The step's action input ``[3, N, B]`` (:func:`assemble_actions`) from the agents' action forces and
+    torques, clamped to their limits (written back to the agents, as VMAS does) and held where an agent
+    cannot move or turn; or, for a ``compiled`` step with nothing to clamp or hold, the (forces, torques)
+    for the compiled step to assemble in its own graph.
+
+    The forces and torques are the rows of the world's action ``block``, read in one op; only when some
+    agent holds a value of its own (one that needs gradients: the block is loose) are they gathered
+    agent by agent."""
     if tables.n_agents == 0:
         return q.new_zeros(q.shape)
     if tables.fixed_agents is None:  # some agent cannot move or turn: its action is ignored there
         tables.fixed_agents = not all(a.movable and a.rotatable for a in agents)
     limited = tables.limits_force or tables.limits_torque
-    forces, torques = [a.state._force for a in agents], [a.state._torque for a in agents]
-    if not (limited or tables.fixed_agents):
-        return (forces, torques) if compiled else assemble_actions(q, tables, forces, torques)
-    force, torque = torch.stack(forces), torch.stack(torques)
+    if block.loose:
+        forces, torques = [a.state._force for a in agents], [a.state._torque for a in agents]
+        if not (limited or tables.fixed_agents):
+            return (forces, torques) if compiled else assemble_actions(q, tables, forces, torques)
+        force, torque = torch.stack(forces), torch.stack(torques)
+    else:
+        force, torque = block.stacks()
+        if not (limited or tables.fixed_agents):
+            return (force, torque) if compiled else assemble_actions(q, tables, force, torque)
     if limited:
-        force, torque = limit_actions(force, torque, tables)
-        for agent, f, t in zip(agents, force.unbind(0), torque.unbind(0)):  # seen by scenarios, as in VMAS
-            if agent.movable:
-                agent.state._force = f
-            if agent.rotatable:
-                agent.state._torque = t
+        force, torque = _limit_and_write_back(force, torque, agents, block, tables)
     if tables.fixed_agents:
         force, torque = hold_agents(force, torque, tables)
     return assemble_actions(q, tables, force, torque)
+
+
+def _limit_and_write_back(force: Tensor, torque: Tensor, agents, block: ActionBlock,
+                          tables: WorldTables) -> Tuple[Tensor, Tensor]:
+    """:func:`limit_actions`, with the clamped values written back where scenarios read them, as VMAS
+    does (only for agents that can move, or turn)."""
+    clamped_force, clamped_torque = limit_actions(force, torque, tables)
+    if not block.loose:  # the rows themselves: one write for all agents
+        force.copy_(torch.where(tables.agent_movable, clamped_force, force))
+        torque.copy_(torch.where(tables.agent_rotatable, clamped_torque, torque))
+        return clamped_force, clamped_torque
+    for agent, f, t in zip(agents, clamped_force.unbind(0), clamped_torque.unbind(0)):
+        if agent.movable:
+            agent.state._set_action("force", f)
+        if agent.rotatable:
+            agent.state._set_action("torque", t)
+    return clamped_force, clamped_torque

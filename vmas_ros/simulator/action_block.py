@@ -1,0 +1,77 @@
+"""Every agent's action force and torque in two world-owned tensors, so a step reads them in one op.
+
+A world of A agents keeps ``force`` ``[A, B, dim_p]`` and ``torque``
+``[A, B, 1]``; agent ``i``'s ``state.force`` is row ``i`` of it, a
+contiguous ``[B, dim_p]`` view. Without the block, every step gathered A small
+tensors into one, which costs a Python call per agent: at thousands of agents
+that is most of the step.
+
+What users see does not change:
+
+- setting ``agent.state.force = t`` copies ``t`` into the agent's row;
+- an edit in place (``agent.state.force[:, 0] = fx``, as VMAS's dynamics make)
+  lands in the row, so the step sees it;
+- a value that needs gradients is kept by the agent itself, not copied (a row
+  would chain every step's graph into one). The block is then *loose* for good,
+  and the step gathers the agents' tensors one by one, as before.
+
+Rows are handed out as agents join; the tensors grow by doubling, and the
+agents' views are moved to the new tensors then, so adding N agents costs
+O(N) in all.
+"""
+from __future__ import annotations
+
+from typing import List, Tuple
+
+import torch
+from torch import Tensor
+
+__all__ = ["ActionBlock", "ACTION_FIELDS"]
+
+#: the agent state fields that live in the block, with their widths given ``dim_p``
+ACTION_FIELDS = ("force", "torque")
+
+
+class ActionBlock:
+    """The action rows of a world's agents (see the module docstring)."""
+
+    def __init__(self, batch_dim: int, dim_p: int, device: torch.device) -> None:
+        self.batch_dim, self.dim_p, self.device = batch_dim, dim_p, torch.device(device)
+        self.count = 0
+        #: some agent holds a force or torque of its own (one that needs gradients): gather per agent
+        self.loose = False
+        self._states: List[object] = []  # AgentState per row, to move their views when the tensors grow
+        self.force, self.torque = self._allocate(0)
+
+    def _allocate(self, capacity: int) -> Tuple[Tensor, Tensor]:
+        return (torch.zeros(capacity, self.batch_dim, self.dim_p, device=self.device),
+                torch.zeros(capacity, self.batch_dim, 1, device=self.device))
+
+    def row(self, field: str, slot: int) -> Tensor:
+        """Row ``slot`` of ``field`` (``"force"`` or ``"torque"``): the view an agent state holds."""
+        return (self.force if field == "force" else self.torque)[slot]
+
+    def append(self, state) -> int:
+        """A zeroed row for ``state`` (an ``AgentState``); returns its slot."""
+        if self.count == self.force.shape[0]:
+            self._resize(max(4, 2 * self.count), self.device)
+        self._states.append(state)
+        self.count += 1
+        return self.count - 1
+
+    def stacks(self) -> Tuple[Tensor, Tensor]:
+        """``(force [A, B, dim_p], torque [A, B, 1])``: every agent's action, as views (not copies)."""
+        return self.force[:self.count], self.torque[:self.count]
+
+    def to(self, device) -> None:
+        """Move the block, and the agents' row views with it, to ``device``."""
+        self._resize(self.force.shape[0], torch.device(device))
+
+    def _resize(self, capacity: int, device: torch.device) -> None:
+        old_force, old_torque = self.stacks()
+        self.device = device
+        self.force, self.torque = self._allocate(capacity)
+        self.force[:self.count].copy_(old_force)
+        self.torque[:self.count].copy_(old_torque)
+        for slot, state in enumerate(self._states):
+            state._move_action_rows(self, slot)
