@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
-from vmas_ros.simulator.physics.collision.sphere_grid import candidate_slots
+from vmas_ros.simulator.physics.collision.sphere_grid import _NEAR, MIN_BUCKETS, candidate_pairs, table_size
 from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES, GRID_START_CAPACITY
 
 
@@ -97,24 +97,25 @@ def test_spheres_on_cell_borders_and_just_touching(device):
 
 
 def test_candidates_are_every_close_pair_once():
-    """candidate_slots finds every pair within one cell width, once, and nothing across envs."""
+    """candidate_pairs finds every pair within one cell width, once, and nothing across envs."""
     generator = torch.Generator().manual_seed(3)
     members, batch, cell = 500, 2, 0.1
     x = (torch.rand(batch * members, generator=generator) - 0.5) * 2.0
     y = (torch.rand(batch * members, generator=generator) - 0.5) * 2.0
     x[7], y[7] = 5e6, -5e6  # clamped to the edge cells: still found with its neighbour
     x[8], y[8] = 5e6 + 0.01, -5e6
-    other, valid, needed = candidate_slots(x, y, members, cell, capacity=64)
+    first, second, valid, needed = candidate_pairs(x, y, members, cell, capacity=64)
     assert int(needed) <= 64
-    rows = torch.arange(x.numel()).unsqueeze(1).expand_as(other)
-    found = set(zip(rows[valid].tolist(), other[valid].tolist()))
+    pairs = list(zip(first[valid].tolist(), second[valid].tolist()))
+    found = set(pairs)
+    assert len(pairs) == len(found), "a pair listed twice would get its contact force twice"
     points = torch.stack([x, y], 1).double()
     env = torch.arange(x.numel()) // members
     near = (torch.cdist(points, points) <= cell) & (env[:, None] == env[None, :])
     close = set(map(tuple, torch.triu(near, diagonal=1).nonzero().tolist()))
     assert close <= found, f"missed {sorted(close - found)[:5]}"
     assert all(i < j and i // members == j // members for i, j in found)
-    assert (7, 8) in found and len(found) == len(set(found))
+    assert (7, 8) in found
 
 
 def test_groups_hold_only_spheres_that_collide_with_everything():
@@ -127,3 +128,12 @@ def test_groups_hold_only_spheres_that_collide_with_everything():
     assert not small.tables.sphere_groups, "below the threshold the pair list is used"
     with pytest.raises(ValueError, match="sphere_grid must be 'auto', 'on' or 'off', got 'yes'"):
         world.sphere_grid = "yes"
+
+
+def test_a_spheres_nine_buckets_are_always_distinct():
+    """The hash's multipliers keep the nine neighbour cells in nine buckets for every table size used,
+    which is what lets the candidate list skip a check for a bucket listed twice."""
+    assert table_size(1) == MIN_BUCKETS and table_size(1000) == 2048
+    for bits in range(MIN_BUCKETS.bit_length() - 1, 63):
+        buckets = {offset & ((1 << bits) - 1) for offset in _NEAR}
+        assert len(buckets) == 9, bits

@@ -96,8 +96,8 @@ class SphereGroup:
     Members collide with everything (the default filter), are movable and in no
     joint. ``cell`` is the grid's cell side: the largest contact distance of two
     members with a margin for float rounding of the cell coordinates.
-    ``capacity`` is the candidate slots per grid row and sphere; ``needed``
-    (0-d, on the device) the longest row run a step has met.
+    ``capacity`` is the room in the candidate list per sphere; ``needed``
+    (0-d, on the device) the most candidates per sphere a step has met.
     """
 
     members: Tensor  # [M] long entity indices

@@ -26,9 +26,10 @@ __all__ = [
 #: beat the grid's sort and searches (docs/bench/swarm.md has both sides of the switch).
 GRID_MIN_SPHERES = 256
 
-#: Candidate slots per sphere and grid row the grid starts with; a step that meets more is computed
-#: again with more (never a lost contact). Sparse swarms rarely have more than a few per row.
-GRID_START_CAPACITY = 4
+#: Room per sphere in the grid's candidate list to start with (the sphere itself and its neighbours'
+#: bucket mates); a step that meets more is computed again with more (never a lost contact). In a
+#: sparse swarm most spheres meet only themselves.
+GRID_START_CAPACITY = 2
 
 #: Below this many envs, pair forces are scattered along dim 0 of a transposed view: CPU
 #: ``index_add_`` along an inner dim pays per index, which dominates when each index moves
