@@ -144,6 +144,8 @@ def test_swarm_workloads_are_sparse_sphere_worlds_without_the_peer_above_the_cap
     for n in (1_000, 10_000, 100_000):
         workload = suite.WORKLOADS[f"swarm_{n}"]
         assert (workload.kind, workload.num_envs, workload.n_agents, workload.spacing) == ("spheres", 1, n, 0.5)
+        assert workload.settle, "swarms time the steady state: one untimed step after the start"
+    assert not suite.WORKLOADS["spheres_100"].settle
     (unit,) = suite.plan_suite(["swarm_1000"], peers=["vmas"], max_peer_agents=100)
     assert unit.sides == ["vmas_ros"] and "max-peer-agents 100" in unit.skipped["vmas"]
     (small,) = suite.plan_suite(["swarm_1000"], peers=["vmas"], max_peer_agents=1_000)
@@ -444,3 +446,19 @@ def test_curve_plot_and_header_show_the_compiled_side(tmp_path):
     assert "Modes measured: eager, compiled." in both["md"].read_text()
     assert "Modes measured: eager. vmas_ros eager (no torch.compile)." in eager["md"].read_text()
     assert json.loads(both["json"].read_text())["modes"] == ["eager", "compiled"]
+
+
+def test_a_settled_sphere_case_steps_once_in_its_untimed_set_up(monkeypatch):
+    from vmas_ros.bench.suite_cases import spheres_case
+    from vmas_ros.simulator.core import World
+
+    steps = []
+    step = World.step
+    monkeypatch.setattr(World, "step", lambda self: (steps.append(self), step(self))[1])
+    for settle, untimed in ((True, 1), (False, 0)):
+        steps.clear()
+        case = spheres_case("vmas_ros", 8, 1, 3, 0, settle=settle)  # builds, then sets up once
+        assert len(steps) == untimed
+        case.setup()
+        case.run()
+        assert len(steps) == 2 * untimed + 3

@@ -86,6 +86,7 @@ class Workload:
     n_agents: Optional[int] = None  # spheres only
     peer: str = PEER_VMAS
     spacing: float = SPHERE_SPACING  # spheres: they start in a square of side spacing * sqrt(n_agents)
+    settle: bool = False  # spheres: one untimed step after the start is set (time the steady state)
 
 
 WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
@@ -99,7 +100,8 @@ WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
     Workload("spread_60", "env", "simple_spread", 32, kwargs={"n_agents": 60}),  # VMAS: as many landmarks
     Workload("scaling_agents", "agents_curve", None, 1),
     # a swarm: spheres of radius 0.05 spread over a square of side 0.5 * sqrt(N), about 3% of it covered
-    *(Workload(f"swarm_{n}", "spheres", None, 1, n_agents=n, spacing=SWARM_SPACING) for n in (1_000, 10_000, 100_000)),
+    *(Workload(f"swarm_{n}", "spheres", None, 1, n_agents=n, spacing=SWARM_SPACING, settle=True)
+      for n in (1_000, 10_000, 100_000)),
     Workload("scaling_envs", "envs_curve", "simple_spread", 1),
     Workload("memory_30k", "memory", "simple_spread", 30_000),
     Workload("mpe_1k", "mpe", "simple_spread", 1_000, peer=PEER_MPE),
@@ -324,7 +326,7 @@ def _measure(unit: Unit, run_id: str, steps: int, repeats: int, warmup: int, thr
         unit.n_agents = _mpe.N_AGENTS
     elif w.kind in ("spheres", "agents_curve"):
         cases = {side: _spheres_case(side, unit.n_agents, unit.num_envs, steps, seed, side in unit.compiled_sides,
-                                     spacing=w.spacing)
+                                     spacing=w.spacing, settle=w.settle)
                  for side in unit.sides}
     else:
         cases = _env_cases(unit, steps, seed)

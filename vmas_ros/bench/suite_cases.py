@@ -84,9 +84,12 @@ def env_cases(unit: "Unit", steps: int, seed: int) -> Dict[str, Case]:
 
 
 def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int, compiled: bool = False,
-                 spacing: float = SPHERE_SPACING) -> Case:
+                 spacing: float = SPHERE_SPACING, settle: bool = False) -> Case:
     """``n_agents`` spheres built with the side's own World/Agent/Sphere, uniform in a square of side
-    ``spacing * sqrt(n_agents)`` (overlapping at the default spacing); times World.step."""
+    ``spacing * sqrt(n_agents)`` (overlapping at the default spacing); times World.step.
+
+    ``settle``: one untimed step after the start is set, on every side, so that the timed steps are the
+    steady state; otherwise the first one also gathers what was set agent by agent (see docs/swarm.md)."""
     core = importlib.import_module(f"{library_of(side)}.simulator.core")
     world = core.World(batch_dim=num_envs, device="cpu")
     if compiled and library_of(side) == "vmas_ros":
@@ -103,6 +106,8 @@ def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int,
             agent.set_pos(p.clone(), batch_index=None)
             agent.set_vel(torch.zeros(num_envs, 2), batch_index=None)
             agent.state.force = f.clone()
+        if settle:
+            world.step()
 
     def run():
         for _ in range(steps):
