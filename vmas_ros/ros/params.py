@@ -16,6 +16,10 @@ from vmas_ros.ros.param_table import Param, ParamTable
 
 CONTROL_MODES = ("zero", "heuristic", "policy")
 RECORD_ON_ERROR = ("continue", "stop")
+PER_AGENT_TOPICS = ("auto", "on", "off")
+#: per_agent_topics: auto gives every agent its own topics up to this many agents; a swarm beyond
+#: would put thousands of endpoints into DDS discovery, so its agents go out in aggregated topics
+PER_AGENT_TOPICS_MAX_AGENTS = 100
 DEVICES = ("cpu", "cuda", "auto")
 #: upper bounds that catch garbage (1e12 envs, a period rclpy cannot hold in int64 ns) before it runs
 MAX_NUM_ENVS = 10_000_000
@@ -153,6 +157,10 @@ SIM_PARAMS = ParamTable("sim_node", [
     Param("lidar_range", 2.0, "range of that lidar, m", minimum=0.0, strict=True),
     Param("cmd_vel_timeout", 0.5, "seconds after which an agent's last command is dropped", runtime=True,
           minimum=0.0),
+    Param("per_agent_topics", "auto", "each agent's own pose, odom, scan, observation, reward, action and cmd_vel "
+          "topics and /tf: on, off, or auto (on up to 100 agents); off publishes lidar/points instead",
+          choices=PER_AGENT_TOPICS),
+    Param("cmd_vel_agents", "", "comma-separated agents that take <agent>/cmd_vel even with per_agent_topics off"),
     Param("use_stamped_cmd_vel", False, "subscribe geometry_msgs/TwistStamped instead of Twist"),
     Param("control", "zero", "what drives agents with no live command (policy needs policy_path)", runtime=True,
           choices=CONTROL_MODES, check=_control),
@@ -194,6 +202,16 @@ class _SimValues:
         """The topics to record (None: everything the node publishes and receives)."""
         names = [t.strip() for t in self.record_topics.split(",") if t.strip()]
         return names or None
+
+    def per_agent(self, n_agents: int) -> bool:
+        """Whether every agent gets topics of its own (``per_agent_topics``)."""
+        if self.per_agent_topics == "auto":
+            return n_agents <= PER_AGENT_TOPICS_MAX_AGENTS
+        return self.per_agent_topics == "on"
+
+    def cmd_vel_names(self) -> List[str]:
+        """``cmd_vel_agents`` as a list of names."""
+        return [n.strip() for n in self.cmd_vel_agents.split(",") if n.strip()]
 
     def step_period(self, dt: float) -> float:
         """Wall-clock seconds between steps; 0 means as fast as possible.

@@ -64,8 +64,10 @@ class AgentTopics:
     """
 
     def __init__(self, node, env, agent_names: Sequence[str], pub_qos, sub_qos,
-                 send: Callable, on_action: Optional[Callable] = None) -> None:
-        self.node, self.env, self.names = node, env, list(agent_names)
+                 send: Callable, on_action: Optional[Callable] = None, topics: bool = True) -> None:
+        """``topics``: False makes no topics at all (a swarm without per-agent topics); the action
+        bounds are still there for the node's own policy."""
+        self.node, self.env, self.names = node, env, list(agent_names) if topics else []
         self.send = send
         self.on_action = on_action  # e.g. record the received message
         self.sizes = [env.get_agent_action_size(a) for a in env.agents]
@@ -105,7 +107,7 @@ class AgentTopics:
         Skipped while nobody subscribes (most runs have no learner attached),
         unless ``always`` (the node records every topic to a bag).
         """
-        if not always and not self._listened():
+        if not self.names or (not always and not self._listened()):
             return
         rows = [flat_observation(o)[env_index] for o in obs]
         sizes = [int(r.numel()) for r in rows]

@@ -61,11 +61,15 @@ class StateMessages:
     ``payloads()`` then yields ``(topic, type name, bytes)`` per message in a fixed
     order. Values go in as ``convert`` computes them (float32 arithmetic where it
     uses float32, ``math`` for trigonometry), so the bytes equal the per-field path.
+
+    ``per_agent``: every agent's own pose, odometry and scans (a swarm leaves them out: its agents
+    are in ``agents/poses``); ``cloud``: ``lidar/points``, every lidar ray's hit as a point of one
+    ``sensor_msgs/PointCloud2`` in the world frame (NaN for a ray that hit nothing).
     """
 
     def __init__(self, agent_names: Sequence[str], n_landmarks: int, n_entities: int,
                  scan_geometry: Dict[int, List[convert.ScanGeometry]], scan_rays: Dict[int, List[int]],
-                 frame_id: str, markers) -> None:
+                 frame_id: str, markers, per_agent: bool = True, cloud: bool = False) -> None:
         from geometry_msgs.msg import Pose, PoseArray, PoseStamped
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
@@ -79,30 +83,41 @@ class StateMessages:
         scans: List[Tuple[int, int]] = []  # (agent, lidar) in ranges order
         self.scan_max: List[np.ndarray] = []
         ranges_offset = 0
+        ray_entity: List[np.ndarray] = []  # per ray, for the cloud: the agent's entity row and its body angle
+        ray_angle: List[np.ndarray] = []
         for i, name in enumerate(agent_names):
             k = n_landmarks + i
-            pose = _Template(f"{name}/pose", PoseStamped(), stamps=["header.stamp"])
-            pose.message.header.frame_id = frame_id
-            pose.f64 = self._pose_fields("pose", k)
-            odom = _Template(f"{name}/odom", Odometry(), stamps=["header.stamp"])
-            odom.message.header.frame_id, odom.message.child_frame_id = frame_id, f"{name}/base_link"
-            t = self._twist_base + 3 * i
-            odom.f64 = self._pose_fields("pose.pose", k) + [
-                ("twist.twist.linear.x", t), ("twist.twist.linear.y", t + 1), ("twist.twist.angular.z", t + 2)]
-            templates += [pose, odom]
+            if per_agent:
+                pose = _Template(f"{name}/pose", PoseStamped(), stamps=["header.stamp"])
+                pose.message.header.frame_id = frame_id
+                pose.f64 = self._pose_fields("pose", k)
+                odom = _Template(f"{name}/odom", Odometry(), stamps=["header.stamp"])
+                odom.message.header.frame_id, odom.message.child_frame_id = frame_id, f"{name}/base_link"
+                t = self._twist_base + 3 * i
+                odom.f64 = self._pose_fields("pose.pose", k) + [
+                    ("twist.twist.linear.x", t), ("twist.twist.linear.y", t + 1), ("twist.twist.angular.z", t + 2)]
+                templates += [pose, odom]
             for j, geometry in enumerate(scan_geometry.get(i, [])):
-                topic = f"{name}/scan" if j == 0 else f"{name}/scan_{j}"
-                scan = _Template(topic, LaserScan(), stamps=["header.stamp"])
-                convert.fill_scan(scan.message, geometry, np.zeros(0, np.float32))
-                scan.message.header.frame_id = f"{name}/base_link"
                 n_rays = scan_rays[i][j]
-                scan.arrays = [("ranges", ranges_offset, n_rays)]
+                if per_agent:
+                    topic = f"{name}/scan" if j == 0 else f"{name}/scan_{j}"
+                    scan = _Template(topic, LaserScan(), stamps=["header.stamp"])
+                    convert.fill_scan(scan.message, geometry, np.zeros(0, np.float32))
+                    scan.message.header.frame_id = f"{name}/base_link"
+                    scan.arrays = [("ranges", ranges_offset, n_rays)]
+                    templates.append(scan)
                 ranges_offset += n_rays
                 self.scan_max.append(np.full(n_rays, geometry.range_max, dtype=np.float32))
                 scans.append((i, j))
-                templates.append(scan)
+                ray_entity.append(np.full(n_rays, k, dtype=np.intp))
+                ray_angle.append(geometry.angle_min + geometry.angle_increment * np.arange(n_rays, dtype=np.float64))
         self.scan_order = scans
         self.n_ranges = ranges_offset
+        self._ray_entity = np.concatenate(ray_entity) if ray_entity else np.zeros(0, np.intp)
+        self._ray_angle = np.concatenate(ray_angle) if ray_angle else np.zeros(0, np.float64)
+        self.cloud = cloud and ranges_offset > 0
+        if self.cloud:
+            templates.append(self._cloud_template(frame_id, ranges_offset))
         for topic, rows in (("agents/poses", range(n_landmarks, n_entities)), ("landmarks/poses", range(n_landmarks))):
             array = _Template(topic, PoseArray(), stamps=["header.stamp"])
             array.message.header.frame_id = frame_id
@@ -122,6 +137,23 @@ class StateMessages:
         self._build()
 
     @staticmethod
+    def _cloud_template(frame_id: str, n_points: int) -> _Template:
+        """``lidar/points``: one x, y, z float32 point per ray, in the world frame, laid out as
+        ``sensor_msgs/PointCloud2`` (unorganised: height 1, not dense, since misses are NaN)."""
+        from sensor_msgs.msg import PointCloud2, PointField
+
+        cloud = _Template("lidar/points", PointCloud2(), stamps=["header.stamp"])
+        message = cloud.message
+        message.header.frame_id = frame_id
+        message.height, message.width = 1, n_points
+        message.fields = [PointField(name=axis, offset=4 * m, datatype=PointField.FLOAT32, count=1)
+                          for m, axis in enumerate("xyz")]
+        message.is_bigendian, message.point_step, message.row_step = False, 12, 12 * n_points
+        message.is_dense = False
+        cloud.arrays = [("data", 0, 3 * n_points)]  # float32 values, written as the message's bytes
+        return cloud
+
+    @staticmethod
     def _pose_fields(prefix: str, k: int) -> List[Tuple[str, int]]:
         """A geometry_msgs/Pose's changing fields: x, y and the yaw quaternion's z, w (the rest stays 0)."""
         return [(f"{prefix}.position.x", 4 * k), (f"{prefix}.position.y", 4 * k + 1),
@@ -137,7 +169,7 @@ class StateMessages:
     def _build(self) -> None:
         """Serialise every prototype with sentinels in its changing fields and record their byte offsets."""
         chunks: List[bytes] = []
-        idx64, src64, idx32, src32, idx_ranges, idx_stamp = [], [], [], [], [], []
+        idx64, src64, idx32, src32, idx_ranges, idx_points, idx_stamp = [], [], [], [], [], [], []
         offset, counter = 0, 0
         self.spans: List[Tuple[int, int]] = []
         for template in self.templates:
@@ -159,8 +191,12 @@ class StateMessages:
                 values = (5.0e4 + 0.5 * np.arange(counter, counter + length)).astype(np.float32)
                 counter += length
                 owner, name = _resolve(message, path)
-                setattr(owner, name, values.tolist())
-                sentinels.append((values.astype("<f4").tobytes(), 4 * length, "ranges", (start, length)))
+                if path == "data":  # a PointCloud2's uint8[] holds the float32 values' bytes
+                    setattr(owner, name, values.astype("<f4").tobytes())
+                    sentinels.append((values.astype("<f4").tobytes(), 4 * length, "points", (start, length)))
+                else:
+                    setattr(owner, name, values.tolist())
+                    sentinels.append((values.astype("<f4").tobytes(), 4 * length, "ranges", (start, length)))
             for path in template.stamps:
                 counter += 1
                 owner, name = _resolve(message, path)
@@ -180,6 +216,8 @@ class StateMessages:
                     idx32.append(rows), src32.append(source)
                 elif kind == "ranges":
                     idx_ranges.append(rows)
+                elif kind == "points":
+                    idx_points.append(rows)
                 else:
                     idx_stamp.append(rows)
             self.spans.append((offset, offset + len(data)))
@@ -191,6 +229,7 @@ class StateMessages:
         self._idx32 = np.array(idx32, dtype=np.intp).reshape(-1, 4)
         self._src32 = np.array(src32, dtype=np.intp)
         self._idx_ranges = np.concatenate(idx_ranges) if idx_ranges else np.zeros(0, np.intp)
+        self._idx_points = np.concatenate(idx_points) if idx_points else np.zeros(0, np.intp)
         self._idx_stamp = np.array(idx_stamp, dtype=np.intp).reshape(-1, 8)
         self._scan_max = np.concatenate(self.scan_max) if self.scan_max else np.zeros(0, np.float32)
         self._data = self.arena.tobytes()
@@ -228,12 +267,28 @@ class StateMessages:
         ranges = np.concatenate([snap.scans[i][j] for i, j in self.scan_order]).astype(np.float32, copy=False)
         return np.where(ranges >= self._scan_max, np.float32(np.inf), ranges).astype(np.float32)
 
+    def points(self, snap: convert.Snapshot, ranges: np.ndarray) -> np.ndarray:
+        """``[R, 3]`` float32: where each ray hit, in the world frame (z 0); NaN for a ray that hit nothing
+        (``ranges`` +inf)."""
+        k = self._ray_entity
+        angle = snap.rot[k].astype(np.float64) + self._ray_angle
+        hit = np.where(np.isfinite(ranges), ranges, np.nan).astype(np.float64)
+        out = np.zeros((k.size, 3), dtype=np.float32)
+        out[:, 0] = snap.pos[k, 0] + hit * np.cos(angle)
+        out[:, 1] = snap.pos[k, 1] + hit * np.sin(angle)
+        out[:, 2] = np.where(np.isfinite(hit), 0.0, np.nan)
+        return out
+
     def fill(self, snap: convert.Snapshot, stamp_ns: int, colours: Optional[np.ndarray] = None) -> None:
         """Write one step into the arena: four scatters, whatever the number of agents."""
         arena = self.arena
         arena[self._idx64] = self.values(snap)[self._src64].astype("<f8").view(np.uint8).reshape(-1, 8)
-        if self._idx_ranges.size:
-            arena[self._idx_ranges] = self.ranges(snap).astype("<f4").view(np.uint8)
+        if self._idx_ranges.size or self._idx_points.size:
+            ranges = self.ranges(snap)
+            if self._idx_ranges.size:
+                arena[self._idx_ranges] = ranges.astype("<f4").view(np.uint8)
+            if self._idx_points.size:
+                arena[self._idx_points] = self.points(snap, ranges).astype("<f4").view(np.uint8).reshape(-1)
         if self._idx32.size and colours is not None:
             arena[self._idx32] = np.asarray(colours, dtype="<f4")[self._src32].view(np.uint8).reshape(-1, 4)
         stamp = np.array([stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000], dtype="<u4").view(np.uint8)
@@ -267,10 +322,11 @@ class StatePublisher:
         from geometry_msgs.msg import PoseArray, PoseStamped
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import LaserScan
+        from sensor_msgs.msg import LaserScan, PointCloud2
         from visualization_msgs.msg import MarkerArray
 
-        classes = {type_name(c): c for c in (PoseArray, PoseStamped, Odometry, Clock, LaserScan, MarkerArray)}
+        classes = {type_name(c): c for c in (PoseArray, PoseStamped, Odometry, Clock, LaserScan, PointCloud2,
+                                              MarkerArray)}
         self.messages = messages
         # no default event handlers: they cost every executor round (QosAudit warns instead)
         self.publishers = [node.create_publisher(classes[kind], topic, qos, event_callbacks=quiet_publisher_events())

@@ -94,8 +94,15 @@ class SimNode(StepLoop, Node):
         self.get_logger().info(
             f"sim_node: scenario {self.params.scenario} with {self.env.n_agents} agents, "
             f"{self.params.num_envs} envs on {self.env.device}, publishing env {self.params.env_index}; "
-            f"drive with <agent>/cmd_vel, e.g. /{self.agent_names[0]}/cmd_vel"
+            + self._drive_hint()
         )
+
+    def _drive_hint(self) -> str:
+        if self.per_agent:
+            return f"drive with <agent>/cmd_vel, e.g. /{self.agent_names[0]}/cmd_vel"
+        taking = ", ".join(self.agent_names[i] for i in self.cmd_vel_agents) or "none (cmd_vel_agents)"
+        return (f"per-agent topics off (per_agent_topics): the swarm is in agents/poses and lidar/points; "
+                f"agents taking cmd_vel: {taking}")
 
     # ----------------------------------------------------------------- parameters
     def _on_set_parameters(self, parameters) -> SetParametersResult:
@@ -143,10 +150,13 @@ class SimNode(StepLoop, Node):
         self.agent_names = convert.unique_names([a.name for a in world.agents])
         self.scan_geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in self.lidars.items()}
         frame = self.params.frame_id
-        for i, name in enumerate(self.agent_names):
-            cmd_type = TwistStamped if self.params.use_stamped_cmd_vel else Twist
-            self.create_subscription(cmd_type, f"{name}/cmd_vel", lambda msg, i=i: self._on_cmd_vel(i, msg), ACCEPT_ANY,
-                                     event_callbacks=quiet_subscription_events())
+        # a swarm's agents go out in aggregated topics only; cmd_vel stays for the agents named
+        self.per_agent = self.params.per_agent(len(self.agent_names))
+        self.cmd_vel_agents = self._cmd_vel_agents()
+        cmd_type = TwistStamped if self.params.use_stamped_cmd_vel else Twist
+        for i in self.cmd_vel_agents:
+            self.create_subscription(cmd_type, f"{self.agent_names[i]}/cmd_vel", lambda msg, i=i: self._on_cmd_vel(i, msg),
+                                     ACCEPT_ANY, event_callbacks=quiet_subscription_events())
         self.markers = MarkerArray()
         for k, entity in enumerate(world.entities):
             marker = Marker()
@@ -155,24 +165,40 @@ class SimNode(StepLoop, Node):
         # poses, odometry, scans, pose arrays, markers and /clock: pre-serialised, filled in bulk (publish.py)
         self.state_messages = StateMessages(
             self.agent_names, len(world.landmarks), len(world.entities), self.scan_geometry,
-            {i: [s.n_rays for s in ls] for i, ls in self.lidars.items()}, frame, self.markers)
+            {i: [s.n_rays for s in ls] for i, ls in self.lidars.items()}, frame, self.markers,
+            per_agent=self.per_agent, cloud=not self.per_agent)
         self._per_env_colours = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
         if self._per_env_colours:
             self.state_messages.set_colour_fields(self._per_env_colours)
         self.state_pub = StatePublisher(self, self.state_messages, RELIABLE)
         self.phases: Optional[StepPhases] = None  # set by `vmas-ros bench node` to time each part of a step
-        self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE) if TFMessage is not None else None
-        if self.tf_pub is None:
+        self.tf_pub = None
+        if TFMessage is None:
             self.get_logger().info("tf2_msgs is not installed: /tf is not published (poses and odometry are)")
+        elif self.per_agent:
+            self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE)
         self.agent_topics = AgentTopics(self, self.env, self.agent_names, RELIABLE, ACCEPT_ANY, self._send,
-                                        on_action=self._record_received)
+                                        on_action=self._record_received, topics=self.per_agent)
         self.learned = self._load_policy()
-        self.topic_audit = TopicAudit.of_sim_node(self, self.agent_names, self.params.use_stamped_cmd_vel)
+        self.topic_audit = TopicAudit.of_sim_node(self, [self.agent_names[i] for i in self.cmd_vel_agents],
+                                                  self.params.use_stamped_cmd_vel)
         self.qos_audit = QosAudit(self, [*self.state_pub.publishers, *self.agent_topics.obs_pubs,
                                          *self.agent_topics.reward_pubs])
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
+
+    def _cmd_vel_agents(self) -> List[int]:
+        """Indices of the agents that take ``<agent>/cmd_vel``: all of them with per-agent topics, else
+        those ``cmd_vel_agents`` names (refused when one is not an agent of the scenario)."""
+        if self.per_agent:
+            return list(range(len(self.agent_names)))
+        named = self.params.cmd_vel_names()
+        unknown = [n for n in named if n not in self.agent_names]
+        if unknown:
+            shown = ", ".join(self.agent_names[:5]) + (", ..." if len(self.agent_names) > 5 else "")
+            raise ConfigError(f"cmd_vel_agents: {', '.join(unknown)} not among the scenario's agents ({shown})")
+        return [self.agent_names.index(n) for n in named]
 
     def _load_policy(self):
         try:
@@ -193,9 +219,9 @@ class SimNode(StepLoop, Node):
         from vmas_ros.viz.foxglove_bridge import FoxgloveBridge
 
         try:
-            bridge = FoxgloveBridge(
+            bridge = FoxgloveBridge(  # a swarm: the scene shows every agent, no channels per agent
                 host=p.foxglove_host, port=p.foxglove_port, frame_id=p.frame_id,
-                agent_names=self.agent_names, on_twist=self._on_foxglove_twist,
+                agent_names=self.agent_names if self.per_agent else (), on_twist=self._on_foxglove_twist,
             )
         except (RuntimeError, OSError) as error:
             raise ConfigError(f"cannot start the Foxglove server on {p.foxglove_host}:{p.foxglove_port}: {error}") from None
@@ -323,8 +349,8 @@ class SimNode(StepLoop, Node):
     def _publish_tf(self, snap, stamp_ns: int) -> None:
         """/tf where tf2_msgs exists; without it, only the bag gets /tf (serialised from its definition)."""
         self._tf_bytes = None
-        if self.tf_pub is None and self.recorder is None:
-            return
+        if not self.per_agent or (self.tf_pub is None and self.recorder is None):
+            return  # a swarm's frames would cost a message per agent each step: agents/poses has them
         stamp, n_landmarks = _stamp(stamp_ns), len(self.env.world.landmarks)
         transforms = []
         for i, name in enumerate(self.agent_names):
