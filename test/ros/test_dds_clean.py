@@ -54,18 +54,20 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=60)
 
 
-def test_dds_clean_command(tmp_path):
+def test_dds_clean_command(tmp_path, capsys):
     stuck = _segment(tmp_path / "fastrtps_port7003", 0)
     ready = _segment(tmp_path / "fastrtps_port7000", 2)
-    dry = _cli("--dir", str(tmp_path), "--dry-run")
+    dry = _cli("--dir", str(tmp_path), "--dry-run")  # as a user runs it
     assert dry.returncode == 0 and f"would remove {stuck}" in dry.stdout and stuck.exists(), dry
-    done = _cli("--dir", str(tmp_path))
-    assert done.returncode == 0 and f"removed {stuck}" in done.stdout, done
-    assert not stuck.exists() and ready.exists()
-    again = _cli("--dir", str(tmp_path))
-    assert again.returncode == 0 and again.stdout.strip() == f"no stuck Fast DDS segments under {tmp_path}"
     bad = _cli("--dir", str(tmp_path), "--min-age", "-1")
     assert bad.returncode == 2 and "--min-age must be >= 0 seconds, got -1.0" in bad.stderr, bad
+    from vmas_ros.cli import main  # the rest in this process: the same entry point, without a new interpreter
+
+    assert main(["dds-clean", "--dir", str(tmp_path)]) == 0
+    assert f"removed {stuck}" in capsys.readouterr().out
+    assert not stuck.exists() and ready.exists()
+    assert main(["dds-clean", "--dir", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.strip() == f"no stuck Fast DDS segments under {tmp_path}"
 
 
 def test_a_slow_start_names_the_stuck_segment(monkeypatch, capsys, tmp_path):

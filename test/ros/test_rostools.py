@@ -76,11 +76,12 @@ def _position(poses) -> tuple:
     return pose.x, pose.y
 
 
-def test_drive_moves_the_agent_as_asked_in_five_fresh_processes(ros, realtime):
-    """0.3 m/s for 2 s is 0.6 m: within 20% every time, each drive a process of its own."""
+def test_drive_moves_the_agent_as_asked_in_three_fresh_processes(ros, realtime):
+    """0.3 m/s for 2 s is 0.6 m: within 20% every time, each drive a process of its own (a drive that
+    published before discovery delivered anything from 0 to all of its Twists)."""
     poses = ros.collect(PoseStamped, "/agent_0/pose")
     distances = []
-    for _ in range(5):
+    for _ in range(3):
         ros.call(Trigger, f"{NODE}/reset")
         fresh(ros, poses)
         start = _position(poses)
