@@ -150,6 +150,16 @@ class Ros:
     def collect(self, msg_type, topic: str, depth: int = 1000) -> Collector:
         return Collector(self, msg_type, topic, depth)
 
+    def publish_for(self, msg_type, topic: str, message, seconds: float, period: float = 0.05) -> None:
+        """Publish ``message`` on ``topic`` every ``period`` s for ``seconds``, spinning meanwhile
+        (a command held, as a teleop would); the publisher is gone afterwards."""
+        publisher = self.node.create_publisher(msg_type, topic, 10)
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            publisher.publish(message)
+            self.spin_for(period)
+        self.node.destroy_publisher(publisher)
+
     def call(self, srv_type, name: str, request=None, timeout: float = 10.0):
         client = self.node.create_client(srv_type, name)
         try:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import signal
-import time
 import warnings
 
 import pytest
@@ -29,14 +28,9 @@ EXPECTED_TYPES = {
 def test_bag_recorded_by_sim_node_reads_back(ros, sim_node, tmp_path, stop_signal):
     bag = tmp_path / "run.mcap"
     sim = sim_node(scenario_kwargs='{"n_agents": 2}', record_path=str(bag), real_time_factor=4.0, lidar_rays=8)
-    publisher = ros.node.create_publisher(Twist, "/agent_0/cmd_vel", 10)
     command = Twist()
     command.linear.x = 0.2
-    end = time.monotonic() + 1.5
-    while time.monotonic() < end:
-        publisher.publish(command)
-        ros.spin_for(0.05)
-    ros.node.destroy_publisher(publisher)
+    ros.publish_for(Twist, "/agent_0/cmd_vel", command, seconds=1.5)
     assert sim.stop(stop_signal) == 0
     assert bag.is_file()
 
