@@ -51,6 +51,7 @@ class _Template:
     f64: List[Tuple[str, int]] = field(default_factory=list)  # (field path, index into the float64 values)
     f32: List[Tuple[str, int]] = field(default_factory=list)  # (field path, index into the float32 values)
     arrays: List[Tuple[str, int, int]] = field(default_factory=list)  # (path, start, length) in the ranges
+    points: List[Tuple[str, int]] = field(default_factory=list)  # (path of a uint8[] holding float32s, count)
     stamps: List[str] = field(default_factory=list)  # paths of builtin_interfaces/Time fields
 
 
@@ -150,7 +151,7 @@ class StateMessages:
                           for m, axis in enumerate("xyz")]
         message.is_bigendian, message.point_step, message.row_step = False, 12, 12 * n_points
         message.is_dense = False
-        cloud.arrays = [("data", 0, 3 * n_points)]  # float32 values, written as the message's bytes
+        cloud.points = [("data", 3 * n_points)]  # float32 values, written as the message's bytes
         return cloud
 
     @staticmethod
@@ -191,12 +192,14 @@ class StateMessages:
                 values = (5.0e4 + 0.5 * np.arange(counter, counter + length)).astype(np.float32)
                 counter += length
                 owner, name = _resolve(message, path)
-                if path == "data":  # a PointCloud2's uint8[] holds the float32 values' bytes
-                    setattr(owner, name, values.astype("<f4").tobytes())
-                    sentinels.append((values.astype("<f4").tobytes(), 4 * length, "points", (start, length)))
-                else:
-                    setattr(owner, name, values.tolist())
-                    sentinels.append((values.astype("<f4").tobytes(), 4 * length, "ranges", (start, length)))
+                setattr(owner, name, values.tolist())
+                sentinels.append((values.astype("<f4").tobytes(), 4 * length, "ranges", (start, length)))
+            for path, length in template.points:
+                packed = (5.0e4 + 0.5 * np.arange(counter, counter + length)).astype("<f4").tobytes()
+                counter += length
+                owner, name = _resolve(message, path)
+                setattr(owner, name, packed)
+                sentinels.append((packed, 4 * length, "points", None))
             for path in template.stamps:
                 counter += 1
                 owner, name = _resolve(message, path)
