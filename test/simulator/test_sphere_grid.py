@@ -14,7 +14,8 @@ import pytest
 import torch
 
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
-from vmas_ros.simulator.physics.collision.sphere_grid import _NEAR, MIN_BUCKETS, candidate_pairs, table_size
+from vmas_ros.simulator.physics.collision.sphere_grid import candidate_pairs
+from vmas_ros.simulator.physics.spatial_hash import MIN_BUCKETS, NEAR_OFFSETS as _NEAR, table_size
 from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES, GRID_START_CAPACITY
 
 

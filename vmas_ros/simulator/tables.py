@@ -111,10 +111,12 @@ class SphereGroup:
     def grow(self) -> bool:
         """Whether a step met more candidates than ``capacity`` (a host read of ``needed``); if so the
         capacity is raised to the next power of two that holds them, and the step must be computed again."""
+        from vmas_ros.simulator.physics.spatial_hash import grown_capacity  # (physics imports the tables)
+
         needed = int(self.needed)
         if needed <= self.capacity:
             return False
-        self.capacity = 1 << (needed - 1).bit_length()
+        self.capacity = grown_capacity(needed)
         return True
 
     @property
