@@ -36,6 +36,9 @@ from vmas_ros.simulator.compiling import WorldKernel
 
 #: target sets :class:`BatchedLidars` keeps plans for (more are planned again)
 MAX_PLANS = 64
+#: how many times any lidar's entity_filter was set after construction (``Lidar.entity_filter``): casts
+#: that keep a plan for a swarm of lidars compare it instead of asking every lidar for its filter per cast
+FILTER_CHANGES = [0]
 
 
 @dataclass

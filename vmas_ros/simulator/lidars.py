@@ -48,7 +48,9 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import torch
 
 from vmas_ros.simulator.lidar_batch import BatchedLidars, CompiledCast
-from vmas_ros.simulator.thresholds import COMPILED_LIDAR_BATCH_MAX_ELEMENTS, LIDAR_BATCH_MAX_ELEMENTS
+from vmas_ros.simulator.lidar_grid import GridCast
+from vmas_ros.simulator.thresholds import (COMPILED_LIDAR_BATCH_MAX_ELEMENTS, GRID_MIN_LIDARS,
+                                           LIDAR_BATCH_MAX_ELEMENTS)
 
 __all__ = ["LidarCaster"]
 
@@ -76,31 +78,80 @@ class LidarCaster:
         self._asked_ever: set = set()  # ... in any state
         self._batched = BatchedLidars()
         self._compiled: Dict[tuple, CompiledCast] = {}  # per batch of lidars
+        self._grid = GridCast()
+        #: the last stacked cast in this state: (its sensors, sensor -> row, grad mode, [L, B, R]) or None
+        self._stack: Optional[tuple] = None
+        #: the last list of lidars stacked: (the list, lidar -> row, whether they share one layout)
+        self._swarm: Optional[tuple] = None
 
-    def reading(self, sensor) -> torch.Tensor:
-        """``sensor``'s distances ``[B, n_rays]`` in the world's current state, cast at most once per state."""
-        world = sensor.world
+    def _refresh(self, world) -> None:
+        """Forget the readings of an earlier state (the asked-for sets move on by one state)."""
         q, _ = world.planar_state()  # the same object until the state changes
         tables = world.tables
         state = self._state
         if state is None or state[0] is not q or state[1] is not tables:
             if state is not None:
                 self._asked_before, self._asked = self._asked, set()
-            self._state, self._readings = (q, tables), {}
+            self._state, self._readings, self._stack = (q, tables), {}, None
+
+    def reading(self, sensor) -> torch.Tensor:
+        """``sensor``'s distances ``[B, n_rays]`` in the world's current state, cast at most once per state."""
+        world = sensor.world
+        self._refresh(world)
         self._asked.add(sensor)
         self._asked_ever.add(sensor)
         grad = torch.is_grad_enabled()  # the reading is to carry the state's gradient, if it has one
         if self._usable(self._readings.get(sensor), sensor, grad):
             return self._readings[sensor][2]
+        stack = self._stack
+        if stack is not None and sensor in stack[1] and (stack[2] or not grad):
+            return stack[3][stack[1][sensor]]
         batch = self._batch(world, sensor, grad)
         readings = self._cast(world, batch)
         if readings is None:  # not castable together, or too large to: this one alone
             batch, readings = [sensor], [sensor.cast_alone()]
+        if isinstance(readings, torch.Tensor):  # a grid cast: rows of one stack
+            self._stack = (batch, {s: i for i, s in enumerate(batch)}, grad, readings)
+            self._state = (world.planar_state()[0], world.tables)
+            return readings[self._stack[1][sensor]]
         for member, reading in zip(batch, readings):
             self._readings[member] = (member.entity_filter, grad, reading)
         # the same state, but reading entity fields nobody had read since a reset may have stacked it anew
-        self._state = (world.planar_state()[0], tables)
+        self._state = (world.planar_state()[0], world.tables)
         return self._readings[sensor][2]
+
+    def latest(self, sensor) -> Optional[torch.Tensor]:
+        """``sensor``'s reading from the latest state it was cast in (None if it was not cast there)."""
+        kept = self._readings.get(sensor)
+        if kept is not None:
+            return kept[2]
+        stack = self._stack
+        if stack is not None and sensor in stack[1]:
+            return stack[3][stack[1][sensor]]
+        return None
+
+    def stacked_readings(self, world, sensors: Sequence) -> torch.Tensor:
+        """Every one of ``sensors``' distances ``[L, B, R]`` (one layout) in the current state, cast at most
+        once per state: for scenarios that observe a whole swarm at once, without a call per lidar."""
+        self._refresh(world)
+        grad = torch.is_grad_enabled()
+        sensors = list(sensors)
+        stack = self._stack
+        if stack is not None and (stack[2] or not grad) and stack[0] == sensors:
+            return stack[3]
+        known = self._swarm
+        if known is None or known[0] != sensors:  # a new list of lidars: its rows and whether it is one layout
+            known = self._swarm = (sensors, {s: i for i, s in enumerate(sensors)},
+                                   len({_layout(s) for s in sensors}) == 1)
+        self._asked.update(sensors)
+        self._asked_ever.update(sensors)
+        readings = self._cast(world, sensors) if known[2] else None
+        if readings is None:
+            readings = [self.reading(s) for s in sensors]
+        stacked = readings if isinstance(readings, torch.Tensor) else torch.stack(readings)
+        self._stack = (sensors, known[1], grad, stacked)
+        self._state = (world.planar_state()[0], world.tables)
+        return stacked
 
     @staticmethod
     def _usable(kept: Optional[tuple], sensor, grad: bool) -> bool:
@@ -121,10 +172,15 @@ class LidarCaster:
                 batch.append(other)
         return batch if sensor in batch else [sensor] + batch  # (a lidar on an agent outside the world)
 
-    def _cast(self, world, batch: Sequence) -> Optional[List[torch.Tensor]]:
-        """Readings of ``batch`` from one cast, or None: cast the lidar asked for alone."""
+    def _cast(self, world, batch: Sequence):
+        """Readings of ``batch`` from one cast (a list, or one ``[L, B, R]`` stack from the grid), or None:
+        cast the lidar asked for alone."""
         elements = world.batch_dim * batch[0].n_rays
         readings = None
+        if len(batch) >= GRID_MIN_LIDARS and not (torch.is_grad_enabled() and world.planar_state()[0].requires_grad):
+            stacked = self._grid.cast(world, batch)  # the spheres near each lidar only (no gradient)
+            if stacked is not None:
+                return stacked
         if world.physics_compiled and elements <= COMPILED_LIDAR_BATCH_MAX_ELEMENTS:
             key = tuple(batch)
             caster = self._compiled.get(key)

@@ -32,7 +32,7 @@ from vmas_ros.simulator.masks import mask_gt, mask_lt
 
 
 __all__ = ["ray_sphere", "ray_box", "ray_segment", "ray_sphere_xy", "ray_box_xy", "ray_segment_xy",
-           "ray_sphere_nearest_xy"]
+           "ray_sphere_nearest_xy", "ray_sphere_reach_xy"]
 
 Scalar = Union[Tensor, float]
 
@@ -125,16 +125,28 @@ def ray_sphere_nearest_xy(
         if ignore is not None:
             per_target = torch.where(ignore > 0, float("inf"), per_target)
         return per_target.amin(dim=0).clamp_max(max_range)
+    distance = ray_sphere_reach_xy(ox, oy, cos_a, sin_a, cx, cy, radius)
+    if ignore is not None:
+        distance = distance.add_(ignore, alpha=_MISS)
+    return distance.amin(dim=0).clamp_max_(max_range)
+
+
+def ray_sphere_reach_xy(ox: Tensor, oy: Tensor, cos_a: Tensor, sin_a: Tensor, cx: Tensor, cy: Tensor,
+                        radius: Scalar) -> Tensor:
+    """Distance along each ray to each sphere, a miss pushed out of reach (``+ 1e30``); all broadcast.
+
+    The per-target terms of :func:`ray_sphere_nearest_xy` before its minimum
+    (no gradient kept): the grid cast (:mod:`vmas_ros.simulator.lidar_grid`)
+    takes its own minimum over the spheres near each lidar, and computing each
+    (ray, sphere) distance with the same arithmetic keeps the two casts equal.
+    """
     to_cx, to_cy = cx - ox, cy - oy
     along = torch.addcmul(to_cx * cos_a, to_cy, sin_a)
     beyond_sq = torch.addcmul(to_cx * to_cx, to_cy, to_cy) - radius * radius
     half_chord_sq = torch.addcmul(-beyond_sq, along, along)
     miss = torch.minimum(half_chord_sq, along)
     miss = torch.le(miss, 0.0, out=miss)  # 1 where the line passes wide or the sphere is behind
-    distance = along.sub_(half_chord_sq.clamp_min_(_TINY).sqrt_()).add_(miss, alpha=_MISS)
-    if ignore is not None:
-        distance = distance.add_(ignore, alpha=_MISS)
-    return distance.amin(dim=0).clamp_max_(max_range)
+    return along.sub_(half_chord_sq.clamp_min_(_TINY).sqrt_()).add_(miss, alpha=_MISS)
 
 
 def ray_box(

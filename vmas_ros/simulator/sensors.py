@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import Callable, List, Optional, Tuple, Union
+from typing import Callable, List, Optional, Sequence, Tuple, Union
 
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.lidar_batch import FILTER_CHANGES
 from vmas_ros.simulator.lidars import LidarCaster
 from vmas_ros.simulator.thresholds import DIRECT_TRIG_MAX_ELEMENTS
 from vmas_ros.simulator.utils import Color
@@ -117,7 +118,16 @@ class Lidar(Sensor):
     n_rays = property(lambda self: self._angles.shape[1])
     max_range = property(lambda self: self._max_range)
     alpha = property(lambda self: self._alpha)
-    last_measurement = property(lambda self: self._last_measurement)
+
+    @property
+    def last_measurement(self) -> Optional[Tensor]:
+        """The distances [batch, n_rays] of the last cast that measured this lidar (``measure``, or a
+        scenario's ``stacked_measure`` of the whole swarm), None before any."""
+        if self._caster is not None:
+            latest = self._caster.latest(self)
+            if latest is not None:
+                return latest
+        return self._last_measurement
 
     @property
     def angles(self) -> Tensor:
@@ -131,6 +141,7 @@ class Lidar(Sensor):
     @entity_filter.setter
     def entity_filter(self, value: Callable) -> None:
         self._entity_filter = value
+        FILTER_CHANGES[0] += 1
 
     @property
     def render_color(self):
@@ -175,6 +186,12 @@ class Lidar(Sensor):
         measurement = self._world_caster().reading(self)
         self._last_measurement = measurement
         return measurement
+
+    def stacked_measure(self, lidars: Sequence["Lidar"]) -> Tensor:
+        """Distances ``[len(lidars), batch, n_rays]`` of ``lidars`` (this one's world's, one ray count and
+        range), cast together once per state: a swarm's observation without a call per lidar. The same
+        numbers as each one's :meth:`measure`."""
+        return self._world_caster().stacked_readings(self._world, lidars)
 
     def cast_alone(self) -> Tensor:
         """Distances [batch, n_rays] from this lidar's own cast: all its rays against all its targets at once."""

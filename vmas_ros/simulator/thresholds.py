@@ -15,7 +15,7 @@ __all__ = [
     "SCATTER_TRANSPOSE_BELOW", "GEMM_SCATTER_MAX_CELLS", "GEMM_SCATTER_MIN_PAIRS", "SMALL_BATCH_ELEMENTS",
     "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
     "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
-    "GRID_MIN_SPHERES", "GRID_START_CAPACITY",
+    "GRID_MIN_SPHERES", "GRID_START_CAPACITY", "GRID_MIN_LIDARS",
 ]
 
 # --- physics step ---------------------------------------------------------------------------
@@ -30,6 +30,12 @@ GRID_MIN_SPHERES = 256
 #: bucket mates); a step that meets more is computed again with more (never a lost contact). In a
 #: sparse swarm most spheres meet only themselves.
 GRID_START_CAPACITY = 2
+
+#: From this many lidars cast together (same ray count and range, sphere targets seen by all), each
+#: lidar's rays are tested only against the spheres within its reach, found through the same grid
+#: (``lidar_grid``), instead of against every target: the all-target cast grows with the square of
+#: the swarm. Below, the all-target cast's few large ops win (docs/bench/swarm.md).
+GRID_MIN_LIDARS = 64
 
 #: Below this many envs, pair forces are scattered along dim 0 of a transposed view: CPU
 #: ``index_add_`` along an inner dim pays per index, which dominates when each index moves
