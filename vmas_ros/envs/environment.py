@@ -19,6 +19,7 @@ from torch import Tensor
 
 from vmas_ros.compat.spaces import space_types
 from vmas_ros.envs import actions as act
+from vmas_ros.envs import stacked as stacked_step
 from vmas_ros.envs.limits import check_world_size
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
@@ -180,17 +181,24 @@ class Environment:
         ``[n_agents, num_envs, size]`` tensor (validated at once; for many agents).
 
         Returns ``obs, rews, dones, infos`` (or ``obs, rews, terminated, truncated,
-        infos`` with ``terminated_truncated=True``).
+        infos`` with ``terminated_truncated=True``): lists (or dicts by name) of
+        per-agent tensors, or, for stacked actions, stacked results: ``obs``
+        ``[n_agents, num_envs, obs_size]``, ``rews`` ``[n_agents, num_envs]``, infos
+        one dict of ``[n_agents, num_envs, ...]`` (:mod:`vmas_ros.envs.stacked`).
         """
+        is_stacked = isinstance(actions, Tensor)
         actions = self._ordered_actions(actions)
         with self._own_rng(host_streams=False), torch.set_grad_enabled(self.grad_enabled):
             self._set_actions(actions)
-            for agent in self.world.agents:
-                self.scenario.env_process_action(agent)
+            if not stacked_step.stackable(self):
+                for agent in self.world.agents:
+                    self.scenario.env_process_action(agent)
             self.scenario.pre_step()
             self.world.step()
             self.scenario.post_step()
             self.steps = self.steps + 1
+            if is_stacked:
+                return stacked_step.step_results(self)
             return self._collect(True, True, True, True)
 
     def _ordered_actions(self, actions):
@@ -235,7 +243,7 @@ class Environment:
                                              self.continuous_actions)
             if not self.grad_enabled and stacked.requires_grad:
                 stacked = stacked.detach()
-            tensors = list(stacked.unbind(0))
+            tensors = None  # one per agent only when needed: a swarm's thousand views cost more than its check
         else:
             tensors = []
             for agent, action, plan in zip(self.agents, actions, self._action_plans()):
@@ -244,8 +252,10 @@ class Environment:
                 if not self.grad_enabled and action.requires_grad:
                     action = action.detach()
                 tensors.append(action)
-        if not tensors:  # every agent is scripted
+        self.world._actions.publish_u(None)  # each agent's own u from here, unless all go in as one block
+        if stacked is None and not tensors:  # every agent is scripted
             return
+        per_agent = lambda: list(stacked.unbind(0)) if tensors is None else tensors  # noqa: E731
         lows, highs = self._stacked_bounds()
         kind = "continuous" if self.continuous_actions else "discrete"
         same_shape = stacked is not None or all(t.shape == tensors[0].shape for t in tensors)
@@ -260,25 +270,28 @@ class Environment:
                 # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
                 if not bool(torch.isfinite(stacked).all()):
                     unbounded = [torch.full_like(low, float("inf")) for low in lows]
-                    act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
+                    act.check_finite_and_range(per_agent(), [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
                 stacked = torch.clamp(stacked, low, high)
-                tensors = list(stacked.unbind(0))
+                tensors = None
             elif stacked.numel() <= FEW_ACTION_ELEMENTS:
                 # few: two calls (clamping changes something, or meets a NaN, exactly when an action is out)
                 if not torch.equal(torch.clamp(stacked, low, high), stacked):
-                    act.check_finite_and_range(tensors, lows, highs, [a.name for a in self.agents], kind)
+                    act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
             else:
                 # the extremes over the batch against the bounds: one pass over the actions (NaN
                 # propagates through min/max and fails both comparisons)
                 smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
                 if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
-                    act.check_finite_and_range(tensors, lows, highs, [a.name for a in self.agents], kind)
+                    act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
+            if stacked_step.set_stacked_forces(self, stacked):
+                return
+            tensors = per_agent()
         elif self.clamp_action and self.continuous_actions:
             unbounded = [torch.full_like(low, float("inf")) for low in lows]
-            act.check_finite_and_range(tensors, [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
+            act.check_finite_and_range(per_agent(), [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
             tensors = [torch.maximum(torch.minimum(a.float(), high), low) for a, low, high in zip(tensors, lows, highs)]
         else:
-            act.check_finite_and_range(tensors, lows, highs, [a.name for a in self.agents], kind)
+            act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
         for agent, action, plan in zip(self.agents, tensors, self._action_plans()):
             self._apply_action(agent, action, plan)
 
@@ -332,7 +345,7 @@ class Environment:
             u = u * agent.action.u_multiplier_tensor
         if noisy:
             u = u + torch.randn_like(u) * agent.action.u_noise_tensor
-        agent.action._u = u  # checked above: [num_envs, size] on the env's device
+        agent.action._set_u(u)  # checked above: [num_envs, size] on the env's device
         if comm:
             if agent.c_noise > 0:
                 c = c + torch.randn_like(c) * agent.c_noise

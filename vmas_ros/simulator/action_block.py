@@ -18,10 +18,15 @@ What users see does not change:
 Rows are handed out as agents join; the tensors grow by doubling, and the
 agents' views are moved to the new tensors then, so adding N agents costs
 O(N) in all.
+
+The block also carries the environment's stacked actions ``u`` ``[A, B,
+size]`` when a step receives them in one tensor (:meth:`publish_u`): each
+agent's ``action.u`` is then its row, taken when first read, so a step of a
+thousand agents costs no call per agent for actions nobody reads.
 """
 from __future__ import annotations
 
-from typing import List, Tuple
+from typing import List, Optional, Tuple
 
 import torch
 from torch import Tensor
@@ -42,6 +47,17 @@ class ActionBlock:
         self.loose = False
         self._states: List[object] = []  # AgentState per row, to move their views when the tensors grow
         self.force, self.torque = self._allocate(0)
+        #: every agent's ``action.u`` of this step stacked ``[A, B, size]`` (None: each agent holds its own),
+        #: and a counter that changes whenever that does (agents compare it with the one they last saw)
+        self.u_rows: Optional[Tensor] = None
+        self.u_version = 0
+
+    def publish_u(self, stacked: Optional[Tensor]) -> None:
+        """Make row ``i`` of ``stacked`` ``[A, B, size]`` agent ``i``'s ``action.u`` (None: each agent's own)."""
+        if stacked is None and self.u_rows is None:
+            return
+        self.u_rows = stacked
+        self.u_version += 1
 
     def _allocate(self, capacity: int) -> Tuple[Tensor, Tensor]:
         return (torch.zeros(capacity, self.batch_dim, self.dim_p, device=self.device),
@@ -73,5 +89,7 @@ class ActionBlock:
         self.force, self.torque = self._allocate(capacity)
         self.force[:self.count].copy_(old_force)
         self.torque[:self.count].copy_(old_torque)
+        if self.u_rows is not None:
+            self.u_rows = self.u_rows.to(device)
         for slot, state in enumerate(self._states):
             state._move_action_rows(self, slot)

@@ -32,6 +32,9 @@ class BaseScenario(abc.ABC):
     def __init__(self) -> None:
         self._world = None
         self._outputs = None  # the batched_outputs hook as the engine runs it, when defined
+        #: how many collections have handed observations out: results cached for a state are computed
+        #: afresh for the next collection, so that two collections never share memory
+        self.env_observations_handed_out_count = 0
         self.viewer_size = INITIAL_VIEWER_SIZE
         self.viewer_zoom = VIEWER_DEFAULT_ZOOM
         self.render_origin = (0.0, 0.0)
@@ -65,6 +68,7 @@ class BaseScenario(abc.ABC):
         # collection computes afresh, so two collections never share memory
         if self._outputs is not None:
             self._outputs.forget()
+        self.env_observations_handed_out_count += 1
 
     def env_reset_world_at(self, env_index) -> None:
         self.world.reset(env_index)
@@ -101,6 +105,24 @@ class BaseScenario(abc.ABC):
         if self._outputs is None:
             raise RuntimeError(f"{type(self).__name__}.outputs(): the scenario does not define batched_outputs")
         return self._outputs()
+
+    # -- optional: every agent at once (the stacked step, vmas_ros.envs.stacked) ------
+    # A swarm's environment step given stacked actions returns stacked results; these hooks let a
+    # scenario compute them without a call per agent. Each returns None (the default) to be asked
+    # agent by agent instead, or fresh tensors it never writes to again, with the agents (in order)
+    # as the first dimension, holding exactly what the per-agent methods return.
+
+    def stacked_observations(self) -> Optional[Tensor]:
+        """Every agent's observation ``[n_agents, batch, obs_size]`` (tensor observations of one shape)."""
+        return None
+
+    def stacked_rewards(self) -> Optional[Tensor]:
+        """Every agent's reward ``[n_agents, batch]``; called instead of ``reward``, before the observations."""
+        return None
+
+    def stacked_infos(self) -> Optional[dict]:
+        """Every agent's info, one dict of ``[n_agents, batch, ...]`` tensors."""
+        return None
 
     @abc.abstractmethod
     def observation(self, agent):

@@ -294,14 +294,34 @@ class Action(_Batched):
         self._u: Optional[Tensor] = None
         self._c: Optional[Tensor] = None
         self._tensor_cache: dict = {}
+        #: the world's action block and this agent's row in its stacked ``u`` (see ActionBlock.publish_u),
+        #: and the block's ``u_version`` this action last took (or overrode) its row at
+        self._block: Optional[ActionBlock] = None
+        self._slot = -1
+        self._u_seen = 0
+
+    def _join_rows(self, block: ActionBlock, slot: int) -> None:
+        """Take ``u`` from row ``slot`` of the block's stacked actions whenever a step publishes some."""
+        self._block, self._slot, self._u_seen = block, slot, block.u_version
 
     @property
     def u(self) -> Optional[Tensor]:
+        block = self._block
+        if block is not None and block.u_version != self._u_seen:  # a step published stacked actions
+            self._u_seen = block.u_version
+            if block.u_rows is not None:
+                self._u = block.u_rows[self._slot]
         return self._u
 
     @u.setter
     def u(self, value: Tensor) -> None:
-        self._u = self._check_tensor("action", "u", value)
+        self._set_u(self._check_tensor("action", "u", value))
+
+    def _set_u(self, value: Optional[Tensor]) -> None:
+        """Hold ``value`` (checked) as ``u``, over any stacked row published before."""
+        self._u = value
+        if self._block is not None:
+            self._u_seen = self._block.u_version
 
     @property
     def c(self) -> Optional[Tensor]:
@@ -343,6 +363,7 @@ class Action(_Batched):
         return self._as_tensor("u_noise")
 
     def _reset(self, env_index) -> None:
+        self._set_u(self.u)  # the published row, if any, becomes the agent's own before it is reset
         for name in ("_u", "_c"):
             value = getattr(self, name)
             if value is None:
@@ -353,6 +374,7 @@ class Action(_Batched):
                 setattr(self, name, TorchUtils.where_from_index(env_index, 0.0, value))
 
     def zero_grad(self) -> None:
+        self._set_u(self.u)
         for name in ("_u", "_c"):
             value = getattr(self, name)
             if value is not None:

@@ -187,6 +187,7 @@ class World:
         self._check_new_name(agent)
         agent._attach(self)
         agent.state._join_actions(self._actions)
+        agent.action._join_rows(self._actions, agent.state._action_slot)
         self._agents.append(agent)
         # agents come last: appending one moves no other entity's row (a swarm adds thousands)
         if not self._state.append_entity(agent):
