@@ -31,9 +31,10 @@ from vmas_ros.bench.suite_report import (
 
 HAS_VMAS = "vmas" in suite._mpe.available_peers()
 HAS_MPE = "mpe" in suite._mpe.available_peers()
-RUN = ["spread_1k", "scaling_envs", "scaling_agents", "memory_30k", "mpe_1k", "discovery_1k"]
+RUN = ["spread_1k", "scaling_envs", "scaling_agents", "scaling_agents_sparse", "memory_30k", "mpe_1k", "discovery_1k"]
 ARGV = ["suite", "--workloads", *RUN, "--scale", "0.002", "--steps", "2", "--repeats", "1", "--threads", "1",
-        "--curve-agents", "2", "4", "--max-peer-agents", "2", "--mpe-max-envs", "1", "--no-progress"]
+        "--curve-agents", "2", "4", "--curve-agents-sparse", "3", "6", "--max-peer-agents", "2", "--mpe-max-envs", "1",
+        "--no-progress"]
 
 
 @pytest.fixture(scope="module")
@@ -137,19 +138,9 @@ def test_peer_above_max_peer_agents_is_omitted_not_extrapolated(run):
         assert by[(2, "vmas")]["status"] == "ok"
     assert by[(4, "vmas")]["status"] == "skipped" and "max-peer-agents 2" in by[(4, "vmas")]["note"]
     assert by[(4, "vmas")].get("median_s") is None
-    assert "VMAS not run at 4 agents" in (out / "suite.md").read_text()
-
-
-def test_swarm_workloads_are_sparse_sphere_worlds_without_the_peer_above_the_cap():
-    for n in (1_000, 10_000, 100_000):
-        workload = suite.WORKLOADS[f"swarm_{n}"]
-        assert (workload.kind, workload.num_envs, workload.n_agents, workload.spacing) == ("spheres", 1, n, 0.5)
-        assert workload.settle, "swarms time the steady state: one untimed step after the start"
-    assert not suite.WORKLOADS["spheres_100"].settle
-    (unit,) = suite.plan_suite(["swarm_1000"], peers=["vmas"], max_peer_agents=100)
-    assert unit.sides == ["vmas_ros"] and "max-peer-agents 100" in unit.skipped["vmas"]
-    (small,) = suite.plan_suite(["swarm_1000"], peers=["vmas"], max_peer_agents=1_000)
-    assert "vmas" not in small.skipped or "not installed" in small.skipped["vmas"]
+    sparse = {(r["n_agents"], r["side"]): r["status"] for r in _rows(document, "scaling_agents_sparse")}
+    assert sparse == {(3, "vmas_ros"): "ok", (3, "vmas"): "skipped", (6, "vmas_ros"): "ok", (6, "vmas"): "skipped"}
+    assert "VMAS not run at 3, 4, 6 agents" in (out / "suite.md").read_text()
 
 
 def test_unavailable_scenario_is_reported_as_skipped(run):
@@ -168,7 +159,8 @@ def test_markdown_table_has_the_columns_and_targets(run):
     assert "| workload | envs | agents | vmas_ros ms/step | VMAS ms/step | ratio | target | met? |" in text
     (line,) = [line for line in text.splitlines() if line.startswith("| memory_30k")]
     assert "<= 1x" in line and " MB" in line
-    assert "### scaling_envs" in text and "### scaling_agents" in text
+    assert "### scaling_envs" in text and "### scaling_agents\n" in text and "### scaling_agents_sparse\n" in text
+    assert "side 0.1·√N" in text and "side 0.5·√N, about 3% covered" in text
 
 
 def _row(workload, side, median_s, value=None, metric="time", **extra):
@@ -240,6 +232,7 @@ def test_missing_peer_and_failing_workload_do_not_stop_the_suite(monkeypatch, ca
     (["--max-peer-agents", "0"], "max_peer_agents must be a positive integer or None, got 0"),
     (["--curve-agents", "10", "0"], "curve_agents must be positive integers; bad value(s): [0]"),
     (["--curve-envs", "-5"], "curve_envs must be positive integers; bad value(s): [-5]"),
+    (["--curve-agents-sparse", "100", "0"], "curve_agents_sparse must be positive integers; bad value(s): [0]"),
     (["--peers", "vmas", "gazebo"], "unknown peer(s) ['gazebo']; valid peers: ['vmas', 'mpe']"),
     (["--devices", "cuda"], "cpu only (its targets are CPU targets); got devices ['cuda']; valid: cpu"),
     (["--num-envs", "7"], "--num-envs 7 is for 'bench mpe'"),
@@ -446,19 +439,3 @@ def test_curve_plot_and_header_show_the_compiled_side(tmp_path):
     assert "Modes measured: eager, compiled." in both["md"].read_text()
     assert "Modes measured: eager. vmas_ros eager (no torch.compile)." in eager["md"].read_text()
     assert json.loads(both["json"].read_text())["modes"] == ["eager", "compiled"]
-
-
-def test_a_settled_sphere_case_steps_once_in_its_untimed_set_up(monkeypatch):
-    from vmas_ros.bench.suite_cases import spheres_case
-    from vmas_ros.simulator.core import World
-
-    steps = []
-    step = World.step
-    monkeypatch.setattr(World, "step", lambda self: (steps.append(self), step(self))[1])
-    for settle, untimed in ((True, 1), (False, 0)):
-        steps.clear()
-        case = spheres_case("vmas_ros", 8, 1, 3, 0, settle=settle)  # builds, then sets up once
-        assert len(steps) == untimed
-        case.setup()
-        case.run()
-        assert len(steps) == 2 * untimed + 3

@@ -51,9 +51,13 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     suite.add_argument("--curve-envs", type=int, nargs="+", default=None, metavar="N",
                        help="suite: num_envs of scaling_envs, before --scale (default: 1 10 100 1000 10000 30000)")
     suite.add_argument("--curve-agents", type=int, nargs="+", default=None, metavar="N",
-                       help="suite: sphere counts of scaling_agents (default: 10 30 100 300 1000)")
+                       help="suite: sphere counts of scaling_agents, overlapping (default: 10 30 100 300 1000)")
+    suite.add_argument("--curve-agents-sparse", type=int, nargs="+", default=None, metavar="N",
+                       help="suite: sphere counts of scaling_agents_sparse, spread as a swarm "
+                            "(default: 100 300 1000 3000 10000 30000 100000)")
     suite.add_argument("--max-peer-agents", type=int, default=None, metavar="N",
-                       help="suite: run VMAS in scaling_agents only up to N agents; above, omitted (default 100)")
+                       help="suite: run VMAS only at points of up to N agents (the agent curves, swarms, "
+                            "navigation swarms); above, omitted (default 100)")
     # no argparse choices: a bad mode exits 2 with the suite's own message, like its other options
     suite.add_argument("--modes", nargs="+", default=None, metavar="MODE",
                        help="suite: how vmas_ros is stepped: eager, compiled (physics through torch.compile, "

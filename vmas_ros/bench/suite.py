@@ -17,6 +17,13 @@ How each side is measured, and why:
 * ``spheres_100`` and ``scaling_agents`` build a world of overlapping spheres
   with each library's own ``World``/``Agent``/``Sphere`` API and time
   ``World.step`` alone: the engine, without any scenario code.
+  ``swarm_N`` and ``scaling_agents_sparse`` do the same with the spheres spread
+  out as a swarm (a square of side ``SWARM_SPACING * sqrt(N)``), after one
+  untimed step, up to 100,000 agents.
+* ``navigation_swarm_N`` steps navigation with N agents in that swarm layout,
+  vmas_ros through the stacked action form (one ``[n_agents, num_envs, size]``
+  tensor, as a swarm's controller would send it), the peer through its list
+  of the same actions.
 * ``memory_30k`` runs each side in a fresh ``python -c`` subprocess that imports
   only torch and its own library, so one side's allocations never inflate the
   other's peak RSS.
@@ -62,13 +69,15 @@ from vmas_ros.bench.suite_report import (
 )
 from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
 
-__all__ = ["MODES", "WORKLOADS", "Workload", "plan_suite", "resolve_modes", "run_suite", "run_suite_command",
-           "validate_suite_options"]
+__all__ = ["MODES", "WORKLOADS", "Workload", "navigation_swarm", "plan_suite", "resolve_modes", "run_suite",
+           "run_suite_command", "validate_suite_options"]
 
 SIDE, PEER_VMAS, PEER_MPE = "vmas_ros", "vmas", "mpe"
 #: how vmas_ros can be stepped (``--modes``): eager, or its physics through torch.compile
 MODES = ("eager", "compiled")
 CURVE_AGENTS = (10, 30, 100, 300, 1000)
+#: the swarm curve goes where only a broad phase can: a step whose cost grows like the agents, not their pairs
+CURVE_AGENTS_SPARSE = (100, 300, 1_000, 3_000, 10_000, 30_000, 100_000)
 CURVE_ENVS = (1, 10, 100, 1000, 10000, 30000)
 #: upstream VMAS buckets pairs in a Python loop with a host sync per pair: above this it takes minutes per step
 DEFAULT_MAX_PEER_AGENTS = 100
@@ -87,6 +96,17 @@ class Workload:
     peer: str = PEER_VMAS
     spacing: float = SPHERE_SPACING  # spheres: they start in a square of side spacing * sqrt(n_agents)
     settle: bool = False  # spheres: one untimed step after the start is set (time the steady state)
+    points: Tuple[int, ...] = ()  # curves: the default x values (agents or num_envs), before any option
+    stacked_actions: bool = False  # env: vmas_ros gets [n_agents, num_envs, size], the peer still a list
+
+
+def navigation_swarm(n_agents: int) -> Workload:
+    """navigation with ``n_agents`` agents of radius 0.05 spawned like a swarm (a square of side
+    ``SWARM_SPACING * sqrt(n_agents)``), LIDARs seeing each other, stepped with stacked actions.
+    A function so that tests can build the same workload with a handful of agents."""
+    half = SWARM_SPACING * math.sqrt(n_agents) / 2
+    kwargs = {"n_agents": n_agents, "agent_radius": 0.05, "world_spawning_x": half, "world_spawning_y": half}
+    return Workload(f"navigation_swarm_{n_agents}", "env", "navigation", 1, kwargs=kwargs, stacked_actions=True)
 
 
 WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
@@ -98,11 +118,14 @@ WORKLOADS: Dict[str, Workload] = {w.name: w for w in (
     Workload("discovery_1k", "env", "discovery", 1_000),
     Workload("spheres_100", "spheres", None, 32, n_agents=100),
     Workload("spread_60", "env", "simple_spread", 32, kwargs={"n_agents": 60}),  # VMAS: as many landmarks
-    Workload("scaling_agents", "agents_curve", None, 1),
+    Workload("scaling_agents", "agents_curve", None, 1, points=CURVE_AGENTS),
     # a swarm: spheres of radius 0.05 spread over a square of side 0.5 * sqrt(N), about 3% of it covered
     *(Workload(f"swarm_{n}", "spheres", None, 1, n_agents=n, spacing=SWARM_SPACING, settle=True)
       for n in (1_000, 10_000, 100_000)),
-    Workload("scaling_envs", "envs_curve", "simple_spread", 1),
+    Workload("scaling_agents_sparse", "agents_curve", None, 1, spacing=SWARM_SPACING, settle=True,
+             points=CURVE_AGENTS_SPARSE),
+    *(navigation_swarm(n) for n in (1_000, 10_000)),
+    Workload("scaling_envs", "envs_curve", "simple_spread", 1, points=CURVE_ENVS),
     Workload("memory_30k", "memory", "simple_spread", 30_000),
     Workload("mpe_1k", "mpe", "simple_spread", 1_000, peer=PEER_MPE),
 )}
@@ -158,7 +181,7 @@ def resolve_modes(modes: Optional[Sequence[str]] = None, compile_physics: bool =
 
 def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs, curve_agents,
                            max_peer_agents, mpe_max_envs, modes: Optional[Sequence[str]] = None,
-                           compile_physics: bool = False) -> Tuple[str, ...]:
+                           compile_physics: bool = False, curve_agents_sparse=None) -> Tuple[str, ...]:
     """Raise ValueError naming the bad value (and the valid ones) for any bad option;
     return the modes to measure (see :func:`resolve_modes`)."""
     resolved = resolve_modes(modes, compile_physics)
@@ -180,6 +203,7 @@ def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, pe
         raise ValueError(f"scale must be a finite number > 0 (e.g. 0.01), got {scale!r}")
     _positive_ints("curve_envs", curve_envs)
     _positive_ints("curve_agents", curve_agents)
+    _positive_ints("curve_agents_sparse", curve_agents_sparse)
     if peers is not None:
         unknown = [p for p in ([peers] if isinstance(peers, str) else peers) if p not in _mpe.PEERS]
         if isinstance(peers, str) or unknown:
@@ -213,22 +237,28 @@ def _our_sides(kind: str, modes: Sequence[str]) -> Tuple[List[str], Tuple[str, .
 def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, peers: Optional[Sequence[str]] = None,
                curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
                max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS,
-               modes: Sequence[str] = ("eager",)) -> List[Unit]:
-    """The points to measure, in workload order, with the reason for every side left out."""
+               modes: Sequence[str] = ("eager",), curve_agents_sparse: Optional[Sequence[int]] = None) -> List[Unit]:
+    """The points to measure, in workload order, with the reason for every side left out.
+
+    A curve's points are its option's (``curve_envs``, ``curve_agents``, ``curve_agents_sparse``)
+    or else its own defaults. The peer is left out of every point with more agents than
+    ``max_peer_agents`` (its pair loop makes it take minutes per step; never extrapolated)."""
     names = list(WORKLOADS) if workloads is None else list(dict.fromkeys(workloads))
     requested = set(_mpe.PEERS if peers is None else peers)
+    chosen = {"scaling_envs": curve_envs, "scaling_agents": curve_agents, "scaling_agents_sparse": curve_agents_sparse}
     units: List[Unit] = []
     for name in names:
         w = WORKLOADS[name]
+        curve = chosen.get(name) or w.points
         peer_reason = None
         if w.peer not in requested:
             peer_reason = f"peer {w.peer} not requested (--peers)"
         elif not _mpe._peer_installed(w.peer):
             peer_reason = f"{_mpe._PEER_MODULE[w.peer]} not installed ({_mpe._PEER_INSTALL[w.peer]})"
         if w.kind == "agents_curve":
-            points = [(1, n) for n in sorted(set(curve_agents or CURVE_AGENTS))]
+            points = [(1, n) for n in sorted(set(curve))]
         elif w.kind == "envs_curve":
-            points = [(n, None) for n in sorted({_scaled(n, scale) for n in (curve_envs or CURVE_ENVS)})]
+            points = [(n, None) for n in sorted({_scaled(n, scale) for n in curve})]
         else:
             points = [(_scaled(w.num_envs, scale), w.n_agents or w.kwargs.get("n_agents"))]
         ours, compiled = _our_sides(w.kind, modes)
@@ -238,8 +268,7 @@ def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, pe
                 skipped = {side: "scenario not available" for side in ours + [w.peer]}
             elif peer_reason:
                 skipped[w.peer] = peer_reason
-            elif (w.kind in ("agents_curve", "spheres") and max_peer_agents is not None
-                  and n_agents > max_peer_agents):
+            elif max_peer_agents is not None and n_agents is not None and n_agents > max_peer_agents:
                 skipped[w.peer] = (f"omitted: above --max-peer-agents {max_peer_agents} "
                                    f"(upstream is O(pairs) with host syncs; not extrapolated)")
             sides = [s for s in ours + [w.peer] if s not in skipped]
@@ -343,7 +372,7 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
               curve_envs: Optional[Sequence[int]] = None, curve_agents: Optional[Sequence[int]] = None,
               max_peer_agents: Optional[int] = DEFAULT_MAX_PEER_AGENTS, mpe_max_envs: Optional[int] = None,
               seed: int = 0, progress: bool = True, compile_physics: bool = False,
-              modes: Optional[Sequence[str]] = None) -> List[dict]:
+              modes: Optional[Sequence[str]] = None, curve_agents_sparse: Optional[Sequence[int]] = None) -> List[dict]:
     """Measure the chosen workloads (default all); one row per (workload, point, side).
 
     Every row has ``status``: ``ok``, ``skipped`` (``note`` says why: scenario not
@@ -356,8 +385,9 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
     ``compile_physics=True`` is the older spelling of ``modes=("compiled",)``.
     """
     modes = validate_suite_options(workloads, steps, repeats, warmup, scale, threads, peers, curve_envs,
-                                   curve_agents, max_peer_agents, mpe_max_envs, modes, compile_physics)
-    units = plan_suite(workloads, scale, peers, curve_envs, curve_agents, max_peer_agents, modes)
+                                   curve_agents, max_peer_agents, mpe_max_envs, modes, compile_physics,
+                                   curve_agents_sparse)
+    units = plan_suite(workloads, scale, peers, curve_envs, curve_agents, max_peer_agents, modes, curve_agents_sparse)
     run_id = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     from tqdm import tqdm
 
@@ -407,6 +437,7 @@ def run_suite_command(args) -> int:
         warmup=getattr(args, "warmup", 1), scale=getattr(args, "scale", 1.0), threads=getattr(args, "threads", None),
         peers=getattr(args, "peers", None), curve_envs=getattr(args, "curve_envs", None),
         curve_agents=getattr(args, "curve_agents", None), mpe_max_envs=getattr(args, "mpe_max_envs", None),
+        curve_agents_sparse=getattr(args, "curve_agents_sparse", None),
         max_peer_agents=getattr(args, "max_peer_agents", None), modes=getattr(args, "modes", None),
         compile_physics=bool(getattr(args, "compile_physics", False)),
     )

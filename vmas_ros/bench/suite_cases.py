@@ -61,7 +61,11 @@ def _random_actions(bounds, num_envs: int, steps: int, seed: int) -> List[List[t
 
 def env_cases(unit: "Unit", steps: int, seed: int) -> Dict[str, Case]:
     """One env per side of ``unit`` (compiled where ``unit.compiled_sides`` says), the same
-    actions for all (drawn in the first side's action space, which is vmas_ros's)."""
+    actions for all (drawn in the first side's action space, which is vmas_ros's).
+
+    With ``workload.stacked_actions`` the vmas_ros sides get each step's actions as one
+    ``[n_agents, num_envs, size]`` tensor (stacked before timing), the form a swarm's
+    controller sends; the peer has no such form and gets the same values as its list."""
     w = unit.workload
     envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed, side in unit.compiled_sides)
             for side in unit.sides}
@@ -71,12 +75,13 @@ def env_cases(unit: "Unit", steps: int, seed: int) -> Dict[str, Case]:
     if len({tuple(d) for d in dims.values()}) > 1:
         raise RuntimeError(f"{w.name}: the sides' action spaces differ: {dims}")
     actions = _random_actions(_action_bounds(first), unit.num_envs, steps, seed)
+    stacked = [torch.stack(action) for action in actions] if w.stacked_actions else actions
     cases = {}
     for side, env in envs.items():
         env.reset()
 
-        def run(env=env):
-            for action in actions:
+        def run(env=env, side_actions=stacked if library_of(side) == "vmas_ros" else actions):
+            for action in side_actions:
                 env.step(action)
 
         cases[side] = Case(run=run, setup=env.reset, device="cpu")

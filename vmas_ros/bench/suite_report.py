@@ -5,6 +5,10 @@ Kept apart from the runner so a report can be rebuilt from saved or synthetic
 rows (the tests feed it rows they made up to check the met/not-met logic).
 Ratios are always ratios of the medians of one run, never of different runs.
 
+The two agent curves, overlapping spheres (``scaling_agents``) and a swarm
+(``scaling_agents_sparse``), share one plot with a dashed line of linear cost, so
+that the swarm's cost per agent can be read against it.
+
 With ``--modes eager compiled`` a point has up to three sides: ``vmas_ros``
 (eager), ``vmas_ros_compiled`` and the peer. Each vmas_ros side gets its own
 ratio against the peer, and a target counts as met when either ratio meets it
@@ -19,8 +23,9 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 from vmas_ros.bench.common import _LABEL, COMPILED_SIDE
 from vmas_ros.bench.report import finish_results, start_results
+from vmas_ros.bench.suite_cases import SPHERE_SPACING, SWARM_SPACING
 
-__all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "evaluate_target", "format_suite_table", "measured_modes",
+__all__ = ["SUITE_COLUMNS", "TARGETS", "CURVES", "PLOTS", "evaluate_target", "format_suite_table", "measured_modes",
            "summarize", "write_suite_results"]
 
 #: the project's speed and memory targets: (op, value) on the ratio. Time: peer / vmas_ros (speed-up, higher
@@ -37,7 +42,17 @@ TARGETS: Dict[str, Tuple[str, float]] = {
     "mpe_1k": (">=", 300.0),
 }
 #: curve workloads and the variable on their x axis
-CURVES = {"scaling_envs": "num_envs", "scaling_agents": "n_agents"}
+CURVES = {"scaling_envs": "num_envs", "scaling_agents": "n_agents", "scaling_agents_sparse": "n_agents"}
+#: the PNGs: kind in the returned paths -> (file name, the curves drawn on its axes)
+PLOTS = {"envs_png": ("suite_envs.png", ("scaling_envs",)),
+         "agents_png": ("suite_agents.png", ("scaling_agents", "scaling_agents_sparse"))}
+#: how the spheres of each agent curve start: (legend name, sentence under its table)
+_LAYOUTS = {
+    "scaling_agents": ("overlapping", f"Spheres of radius 0.05 uniform in a square of side {SPHERE_SPACING:g}·√N: "
+                                      f"most of it covered, many overlapping."),
+    "scaling_agents_sparse": ("swarm", f"A swarm: spheres of radius 0.05 uniform in a square of side "
+                                       f"{SWARM_SPACING:g}·√N, about 3% covered; one untimed step first."),
+}
 #: the sides that are vmas_ros (eager or compiled); any other side of a point is its peer
 OURS = ("vmas_ros", COMPILED_SIDE)
 
@@ -196,7 +211,8 @@ def _curve_table(workload: str, entries: List[dict]) -> List[str]:
     else:
         head = ["agents", "vmas_ros ms/step", "VMAS ms/step", "speed-up"]
         head += ["compiled ms/step", "compiled speed-up"] if compiled else []
-    lines = [f"### {workload}", "", *_header(head, left=())]
+    lines = [f"### {workload}", ""] + ([_LAYOUTS[workload][1], ""] if workload in _LAYOUTS else [])
+    lines += _header(head, left=())
     for e in entries:
         cells = [str(e[x]), _value(e, "vmas_ros"), _value(e, "peer")]
         keys = ("vmas_ros_env_steps_per_s", "peer_env_steps_per_s") if x == "num_envs" else ()
@@ -249,10 +265,36 @@ def _title(info: dict, what: str) -> str:
             f"{info['cpu_count']} CPUs ({info.get('cpu_model') or 'CPU'}), {(info['date'] or '')[:10]}")
 
 
-def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> bool:
-    """Log-log plot of one curve, both sides, min-max of the repeats as bars; False if nothing to plot."""
-    x_key = CURVES[workload]
-    ok = [r for r in rows if r["workload"] == workload and r.get("status") == "ok"]
+#: the agents plot's linear reference starts here: below, fixed costs per step hide the cost per agent
+_LINEAR_FROM = 1_000
+
+
+def _linear_reference(ax, ok: Sequence[dict], workloads: Sequence[str]) -> None:
+    """A dashed line of cost proportional to the agents, through the largest point of the last
+    measured curve's vmas_ros line (the swarm's when there is one), where a fixed cost per step
+    matters least; drawn from ``_LINEAR_FROM`` agents on (over the whole curve when it has fewer than
+    two points there)."""
+    for workload in reversed(workloads):
+        line = sorted((r for r in ok if r["workload"] == workload and r["side"] == "vmas_ros"),
+                      key=lambda r: r["n_agents"])
+        if line:
+            break
+    else:
+        return
+    x0, y0 = line[-1]["n_agents"], line[-1]["per_step_ms"]
+    above = [r["n_agents"] for r in line if r["n_agents"] >= _LINEAR_FROM]
+    xs = [above[0] if len(above) > 1 else line[0]["n_agents"], x0]
+    if xs[0] == x0:  # one point: no slope to show
+        return
+    ax.plot(xs, [y0 * x / x0 for x in xs], linestyle="--", color="0.4", linewidth=1,
+            label="linear cost (time ∝ agents)")
+
+
+def _plot_curves(rows: Sequence[dict], workloads: Sequence[str], path: Path, info: dict) -> bool:
+    """Log-log plot of curves sharing an x axis, every side, min-max of the repeats as bars; the
+    agent curves with a linear-cost reference. False if nothing to plot."""
+    x_key = CURVES[workloads[0]]
+    ok = [r for r in rows if r["workload"] in workloads and r.get("status") == "ok"]
     if not ok:
         return False
     import matplotlib
@@ -262,30 +304,39 @@ def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> 
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 
     colors = {"vmas_ros": "tab:green", COMPILED_SIDE: "tab:orange", "vmas": "tab:blue"}
+    lines = {"scaling_agents_sparse": ("-.", "s")}  # (linestyle, marker); the rest solid with dots
     steps = ok[0]["steps"]
     fig, ax = plt.subplots(figsize=(8, 5), dpi=110)
-    for side in ("vmas_ros", COMPILED_SIDE, "vmas"):
-        line = sorted((r for r in ok if r["side"] == side), key=lambda r: r[x_key])
-        if not line:
-            continue
-        style = COMPILED_SIDE if side in OURS and all(r.get("compiled") for r in line) else side  # --modes compiled
-        xs = [r[x_key] for r in line]
-        if x_key == "num_envs":  # throughput: higher is better
-            ys = [r["env_steps_per_s"] for r in line]
-            low = [r["num_envs"] * steps / r["max_s"] for r in line]
-            high = [r["num_envs"] * steps / r["min_s"] for r in line]
-        else:
-            ys = [r["per_step_ms"] for r in line]
-            low = [r["min_s"] / steps * 1e3 for r in line]
-            high = [r["max_s"] / steps * 1e3 for r in line]
-        ax.plot(xs, ys, marker="o", color=colors[style], label=f"{_LABEL[style]} (CPU)")
-        ax.vlines(xs, low, high, color=colors[style], alpha=0.5)
-    omitted = sorted(r[x_key] for r in rows if r["workload"] == workload and "omitted" in (r.get("note") or ""))
+    for workload in workloads:
+        linestyle, marker = lines.get(workload, ("-", "o"))
+        layout = f", {_LAYOUTS[workload][0]}" if workload in _LAYOUTS else ""
+        for side in ("vmas_ros", COMPILED_SIDE, "vmas"):
+            line = sorted((r for r in ok if r["workload"] == workload and r["side"] == side), key=lambda r: r[x_key])
+            if not line:
+                continue
+            style = COMPILED_SIDE if side in OURS and all(r.get("compiled") for r in line) else side  # --modes compiled
+            xs = [r[x_key] for r in line]
+            if x_key == "num_envs":  # throughput: higher is better
+                ys = [r["env_steps_per_s"] for r in line]
+                low = [r["num_envs"] * steps / r["max_s"] for r in line]
+                high = [r["num_envs"] * steps / r["min_s"] for r in line]
+            else:
+                ys = [r["per_step_ms"] for r in line]
+                low = [r["min_s"] / steps * 1e3 for r in line]
+                high = [r["max_s"] / steps * 1e3 for r in line]
+            ax.plot(xs, ys, marker=marker, linestyle=linestyle, color=colors[style],
+                    label=f"{_LABEL[style]} (CPU){layout}")
+            ax.vlines(xs, low, high, color=colors[style], alpha=0.5)
+    if x_key == "n_agents":
+        _linear_reference(ax, ok, workloads)
+    mine = [r for r in rows if r["workload"] in workloads]
+    omitted = sorted({r[x_key] for r in mine if "omitted" in (r.get("note") or "")})
     if omitted:
-        ax.plot([], [], linestyle="none", label=f"VMAS omitted at {', '.join(map(str, omitted))} (not extrapolated)")
+        ax.plot([], [], linestyle="none",
+                label=f"VMAS omitted at {', '.join(f'{n:,}' for n in omitted)} (not extrapolated)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ticks = sorted({r[x_key] for r in rows if r["workload"] == workload})
+    ticks = sorted({r[x_key] for r in mine})
     ax.xaxis.set_major_locator(FixedLocator(ticks))
     ax.xaxis.set_minor_locator(NullLocator())
     ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:,.0f}"))
@@ -298,7 +349,8 @@ def _plot_curve(rows: Sequence[dict], workload: str, path: Path, info: dict) -> 
     else:
         ax.set_xlabel("number of colliding sphere agents (1 env)")
         ax.set_ylabel("ms per World.step")
-        what = f"World.step time vs agents, overlapping spheres ({steps} steps per run)"
+        layouts = " and ".join(_LAYOUTS[w][0] for w in workloads if any(r["workload"] == w for r in ok))
+        what = f"World.step time vs agents, {layouts} spheres ({steps} steps per run)"
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(loc="best", fontsize=8, title=f"bars: min-max of {ok[0]['repeats']} repeats", title_fontsize=8)
     ax.set_title(_title(info, what), fontsize=9)
@@ -328,13 +380,17 @@ _MODES_LINE = {
 
 def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str, Path]:
     """Write ``suite.csv`` (one row per workload point and side, every repeat), ``suite.json``
-    (rows, summary, machine info), ``suite.md`` and, with ``plot``, ``suite_envs.png`` /
-    ``suite_agents.png`` for the curves that were measured. Returns the paths by kind."""
+    (rows, summary, machine info), ``suite.md`` and, with ``plot``, the PNGs of :data:`PLOTS`
+    whose curves were measured (``suite_agents.png``: both agent curves on one pair of axes).
+    Returns the paths by kind."""
     out, rows, info, paths = start_results(rows, out_dir, "suite", SUITE_COLUMNS)
     summary = summarize(rows)
     notes = [
-        "Timed: steps calls of env.step (World.step for spheres_100 and scaling_agents); building, the reset "
-        "before each repeat and the random actions (one seeded generator, shared by both sides) are not.",
+        "Timed: steps calls of env.step (World.step for the sphere worlds: spheres_100, swarm_N, scaling_agents "
+        "and scaling_agents_sparse); building, the reset before each repeat and the random actions (one seeded "
+        "generator, shared by both sides) are not.",
+        "navigation_swarm_N: vmas_ros takes each step's actions stacked in one [n_agents, num_envs, size] tensor, "
+        "VMAS the same values as its list of per-agent tensors.",
         "Sides alternate inside every repeat; ratios are of the medians of this run.",
         "memory_30k: peak RSS of a fresh python process per side and repeat (torch + that library only); "
         "baseline_rss_mb is its RSS after the imports. For the other rows peak_rss_mb is this process's "
@@ -353,8 +409,7 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
                   "\n", ". ") + "\n\n")
     finish_results(paths, document, header + format_suite_table(summary))
     if plot:
-        for workload, kind in (("scaling_envs", "envs_png"), ("scaling_agents", "agents_png")):
-            path = out / f"suite_{'envs' if kind == 'envs_png' else 'agents'}.png"
-            if _plot_curve(rows, workload, path, info):
-                paths[kind] = path
+        for kind, (name, workloads) in PLOTS.items():
+            if _plot_curves(rows, workloads, out / name, info):
+                paths[kind] = out / name
     return paths
