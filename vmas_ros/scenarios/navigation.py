@@ -63,6 +63,7 @@ from vmas_ros.scenarios.common import for_index as shaped_for
 from vmas_ros.scenarios.common import configure, heuristic_kwargs, range_links, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
+from vmas_ros.simulator.neighbours import ClosePairs
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import ScenarioUtils, TorchUtils
@@ -176,8 +177,11 @@ class Scenario(BaseScenario):
             goal_slots(self.n_agents, self.agents_with_same_goal, self.split_goals), device=world.device
         )
         self._index = {agent.name: i for i, agent in enumerate(world.agents)}
-        #: [n, n] bool: pairs of distinct agents
-        self._others = ~torch.eye(self.n_agents, dtype=torch.bool, device=world.device)
+        #: the collision term's candidates: pairs of agents close enough to touch (a little margin: the
+        #: exact test is the reward's own)
+        self._close = ClosePairs((2 * self.agent_radius + TOUCH_DISTANCE) * (1 + 1e-3))
+        #: what the stacked results were computed for: (planar state, tables, hand-outs so far) -> value
+        self._cache: dict = {}
         #: per env [B, n]: each agent's distance to its goal x pos_shaping_factor, as of the last reward
         self.pos_shaping = torch.zeros(batch_dim, self.n_agents, device=world.device)
         #: the last reward's terms: per agent [B, n] (shaping, collisions), per env [B] (team shaping, final)
@@ -211,24 +215,44 @@ class Scenario(BaseScenario):
             self.pos_shaping[env_index] = shaped_for(shaping, env_index)
 
     # ------------------------------------------------------------------ reward
+    def _rows(self) -> tuple[Tensor, Tensor]:
+        """The agents' and their goals' rows in the world's stacked state, each [n] (fixed after make_world)."""
+        rows = self._cache.get("rows")
+        if rows is None:
+            slot = {id(e): i for i, e in enumerate(self.world.entities)}
+            device = self.world.device
+            rows = self._cache["rows"] = (
+                torch.tensor([slot[id(a)] for a in self.world.agents], device=device),
+                torch.tensor([slot[id(a.goal)] for a in self.world.agents], device=device),
+            )
+        return rows
+
     def _positions(self) -> tuple[Tensor, Tensor]:
         """Agents' and their goals' positions, each [B, n, 2]."""
-        agents = torch.stack([a.state.pos for a in self.world.agents], dim=1)
-        goals = torch.stack([a.goal.state.pos for a in self.world.agents], dim=1)
-        return agents, goals
+        pos = self.world.stacked_state("pos")  # [N, B, 2]
+        agents, goals = self._rows()
+        return pos.index_select(0, agents).transpose(0, 1), pos.index_select(0, goals).transpose(0, 1)
 
     def _collision_counts(self, pos: Tensor) -> Tensor:
         """How many other agents each agent touches (surfaces within TOUCH_DISTANCE): [B, n].
 
         A pair counts only if its centres are within two radii in some env of
-        the batch (VMAS's ``World.collides``, a batch-wide test), computed here
-        as a tensor reduction so that no value is read back to the host.
+        the batch (VMAS's ``World.collides``, a batch-wide test). Only pairs
+        close enough to touch are tested (``ClosePairs``: every pair in a small
+        team, the grid's in a swarm).
         """
-        centres = torch.linalg.vector_norm(pos.unsqueeze(2) - pos.unsqueeze(1), dim=-1)  # [B, n, n]
+        batch, n = pos.shape[:2]
         reach = 2 * self.agent_radius
-        in_play = (centres <= reach).any(dim=0, keepdim=True) & self._others  # [1, n, n]
-        touching = centres - reach <= TOUCH_DISTANCE
-        return (touching & in_play).sum(dim=-1)
+        flat = pos.reshape(batch * n, 2)  # env-major
+        first, second = self._close(pos)
+        centres = torch.linalg.vector_norm(flat[first] - flat[second], dim=-1)
+        pair = (first % n) * n + second % n  # the same two agents in every env
+        in_play = torch.isin(pair, pair[centres <= reach])
+        hit = in_play & (centres - reach <= TOUCH_DISTANCE)
+        counts = torch.zeros(batch * n, dtype=torch.long, device=pos.device)
+        ones = torch.ones_like(first[hit])
+        counts.index_add_(0, first[hit], ones).index_add_(0, second[hit], ones)
+        return counts.view(batch, n)
 
     def _all_rewards(self) -> Tensor:
         """Every agent's reward [B, n]; caches the terms ``info`` reports."""
@@ -252,16 +276,40 @@ class Scenario(BaseScenario):
             self._rewards = self._all_rewards()
         return self._rewards[:, self._index[agent.name]]
 
+    def stacked_rewards(self) -> Tensor:
+        """Every agent's reward [n, B] at once (the stacked step; the same values as ``reward``)."""
+        self._rewards = self._all_rewards()
+        return self._rewards.t()
+
     # ------------------------------------------------------------- observation
-    def observation(self, agent: Agent) -> Tensor:
-        if self.observe_all_goals:
-            to_goals = [agent.state.pos - other.goal.state.pos for other in self.world.agents]
+    def stacked_observations(self) -> Tensor:
+        """Every agent's observation [n, B, width], computed once per state and hand-out; ``observation`` reads
+        its row, so both forms give the same values."""
+        world = self.world
+        key = (world.planar_state()[0], world.tables, self.env_observations_handed_out_count)
+        cached = self._cache.get("obs")
+        if cached is not None and cached[0][0] is key[0] and cached[0][1] is key[1] and cached[0][2] == key[2]:
+            return cached[1]
+        agents, goal_rows = self._rows()
+        pos_all = world.stacked_state("pos")
+        pos, vel = pos_all.index_select(0, agents), world.stacked_state("vel").index_select(0, agents)  # [n, B, 2]
+        goals = pos_all.index_select(0, goal_rows)
+        if self.observe_all_goals:  # own position minus every agent's goal, in agent order: [n, B, 2n]
+            to_goals = (pos.unsqueeze(2) - goals.transpose(0, 1).unsqueeze(0)).flatten(2)
         else:
-            to_goals = [agent.state.pos - agent.goal.state.pos]
-        parts = [agent.state.pos, agent.state.vel, *to_goals]
+            to_goals = pos - goals
+        parts = [pos, vel, to_goals]
         if self.collisions:
-            parts.append(self.lidar_range - agent.sensors[0].measure())
-        return torch.cat(parts, dim=-1)
+            lidars = self._cache.get("lidars")
+            if lidars is None:
+                lidars = self._cache["lidars"] = [agent.sensors[0] for agent in world.agents]
+            parts.append(self.lidar_range - lidars[0].stacked_measure(lidars))
+        obs = torch.cat(parts, dim=-1)
+        self._cache["obs"] = (key, obs)
+        return obs
+
+    def observation(self, agent: Agent) -> Tensor:
+        return self.stacked_observations()[self._index[agent.name]]
 
     def info(self, agent: Agent) -> dict:
         i = self._index[agent.name]
@@ -269,6 +317,15 @@ class Scenario(BaseScenario):
             "pos_rew": self.pos_rew if self.shared_rew else self.agent_pos_rew[:, i],
             "final_rew": self.final_rew,
             "agent_collisions": self.agent_collision_rew[:, i],
+        }
+
+    def stacked_infos(self) -> dict:
+        """``info`` of every agent at once, each [n, B]."""
+        n = self.n_agents
+        return {
+            "pos_rew": self.pos_rew.repeat(n, 1) if self.shared_rew else self.agent_pos_rew.t().contiguous(),
+            "final_rew": self.final_rew.repeat(n, 1),
+            "agent_collisions": self.agent_collision_rew.t().contiguous(),
         }
 
     def done(self) -> Tensor:
