@@ -46,7 +46,9 @@ NODE_COLUMNS = [
 MARK_SETTLE_S = 0.3
 #: topic kinds the subscriber can take: the target's four, and everything else sim_node publishes by default
 CORE_KINDS = ("pose", "odom", "scan", "clock")
-ALL_KINDS = CORE_KINDS + ("arrays", "markers", "observation", "reward")
+ALL_KINDS = CORE_KINDS + ("arrays", "markers", "observation", "reward", "points")
+#: what a swarm's viewer takes (per-agent topics off): every pose in one array, every lidar hit in one cloud
+SWARM_KINDS = ("arrays", "points")
 
 
 def add_node_bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -59,9 +61,10 @@ def add_node_bench_arguments(parser: argparse.ArgumentParser) -> argparse.Argume
     node.add_argument("--lidar-rays", type=int, default=12, help="node: rays of each agent's lidar (default 12; 0: no lidar)")
     node.add_argument("--node-num-envs", type=int, default=1, help="node: num_envs of the node (default 1)")
     node.add_argument("--duration", type=float, default=3.0, help="node: seconds per timed window (default 3)")
-    node.add_argument("--subscribe", choices=("core", "all", "none"), default="core",
+    node.add_argument("--subscribe", choices=("core", "all", "swarm", "none"), default="core",
                       help="node: topics the subscriber process takes: core = pose, odom, scan, /clock (default); "
-                           "all = also pose arrays, markers, observations, rewards; none = no subscriber")
+                           "all = also pose arrays, markers, observations, rewards, the lidar point cloud; "
+                           "swarm = agents/poses and lidar/points only; none = no subscriber")
     node.add_argument("--unpaced-batch-ms", type=float, default=None,
                       help="node: the node's unpaced_batch_ms, wall ms of steps per executor round (default: the "
                            "node's, 4)")
@@ -128,7 +131,8 @@ def _topics(node, kinds) -> Dict[str, str]:
     for topic, kind in zip(resolved, messages.types):
         leaf = topic.rsplit("/", 1)[-1]
         group = ("clock" if topic == "/clock" else "scan" if leaf.startswith("scan") else
-                 "arrays" if leaf == "poses" else "markers" if leaf == "markers" else leaf)
+                 "arrays" if leaf == "poses" else "markers" if leaf == "markers" else
+                 "points" if topic.endswith("lidar/points") else leaf)
         if group in kinds:
             wanted[topic] = kind
     if "observation" in kinds or "reward" in kinds:
@@ -172,7 +176,7 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
                        add_lidar=lidar_rays > 0, lidar_rays=max(1, lidar_rays), compile_physics=compile_physics, **extra)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        kinds = {"core": CORE_KINDS, "all": ALL_KINDS, "none": ()}[subscribe]
+        kinds = {"core": CORE_KINDS, "all": ALL_KINDS, "swarm": SWARM_KINDS, "none": ()}[subscribe]
         topics = _topics(node, kinds)
         if topics:
             subscriber = subprocess.Popen(

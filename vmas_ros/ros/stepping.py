@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import List, Optional
 
 import numpy as np
+import torch
 
 from vmas_ros.ros import convert
 from vmas_ros.ros.lifecycle import SimulationFault
@@ -90,7 +91,7 @@ class StepLoop:
                 phases.add("actions", start)
                 start = time.perf_counter()
             stage = "engine"
-            self.obs, self.rewards, _, _ = self.env.step(actions)
+            self.obs, self.rewards, _, _ = self.env.step(self._engine_actions(actions))
             self.steps += 1
             if phases is not None:
                 phases.add("engine", start)
@@ -98,6 +99,14 @@ class StepLoop:
             return self._gather()
         except Exception as error:
             self._raise_fault(stage, error, self.steps if stage == "publish" else self.steps + 1)
+
+    def _engine_actions(self, actions: List[torch.Tensor]):
+        """What ``env.step`` gets: a swarm's (no per-agent topics) actions stacked in one tensor, so that
+        neither the step nor its observations and rewards cost a call per agent (they come back stacked
+        too, and are read row by row like the lists); a small team's list, as VMAS takes it."""
+        if self.per_agent or not actions or any(a.shape != actions[0].shape for a in actions):
+            return actions
+        return torch.stack(actions)
 
     def _emit_step(self, step: ComputedStep) -> None:
         try:
