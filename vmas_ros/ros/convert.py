@@ -52,21 +52,38 @@ class Snapshot:
     vel: np.ndarray  # [N, 2]
     rot: np.ndarray  # [N]
     ang_vel: np.ndarray  # [N]
-    scans: Dict[int, List[np.ndarray]]  # agent index -> one array per lidar
+    #: agent index -> the ray count of each of its lidars, in the order the scans follow the state in ``host``
+    rays: Dict[int, List[int]]
     #: everything above in one host array: the state's 6 N values, then every scan (see all_finite)
     host: Optional[np.ndarray] = None
     n_state: int = 0
     #: the all_finite answer when whoever took the snapshot worked it out already (a compiled step)
     finite: Optional[bool] = None
 
+    @property
+    def scans(self) -> Dict[int, List[np.ndarray]]:
+        """Agent index -> one array per lidar (views into ``host``), laid out when first asked for: a swarm's
+        publishers take every scan at once (:attr:`scan_block`) and never need the thousand views."""
+        scans = self.__dict__.get("_scans")
+        if scans is None:
+            scans, offset = {}, self.n_state
+            for i, counts in self.rays.items():
+                scans[i] = []
+                for n in counts:
+                    scans[i].append(self.host[offset: offset + n])
+                    offset += n
+            self.__dict__["_scans"] = scans
+        return scans
+
+    @property
+    def scan_block(self) -> np.ndarray:
+        """Every scan's ranges end to end, in ``rays`` order (a view into ``host``)."""
+        return self.host[self.n_state:]
+
     def all_finite(self) -> bool:
         """No NaN or inf in the state and no NaN in a scan (an unhit ray may read inf): two passes in all."""
         if self.finite is not None:
             return self.finite
-        if self.host is None:
-            return bool(np.isfinite(self.pos).all() and np.isfinite(self.vel).all() and np.isfinite(self.rot).all()
-                        and np.isfinite(self.ang_vel).all()
-                        and not any(np.isnan(s).any() for ss in self.scans.values() for s in ss))
         return bool(np.isfinite(self.host[: self.n_state]).all() and not np.isnan(self.host[self.n_state:]).any())
 
     @staticmethod
@@ -82,13 +99,7 @@ class Snapshot:
         ``host``, no copies); ``finite``: the :meth:`all_finite` answer when it is known already."""
         n_state = host.size - sum(n for counts in rays.values() for n in counts)
         state = host[:n_state].reshape(6, -1)
-        scans, offset = {}, n_state
-        for i, counts in rays.items():
-            scans[i] = []
-            for n in counts:
-                scans[i].append(host[offset: offset + n])
-                offset += n
-        return Snapshot(state[0:2].T, state[3:5].T, state[2], state[5], scans, host, n_state, finite)
+        return Snapshot(state[0:2].T, state[3:5].T, state[2], state[5], rays, host, n_state, finite)
 
 
 class PublishedEnv:

@@ -113,6 +113,8 @@ class StateMessages:
                 ray_entity.append(np.full(n_rays, k, dtype=np.intp))
                 ray_angle.append(geometry.angle_min + geometry.angle_increment * np.arange(n_rays, dtype=np.float64))
         self.scan_order = scans
+        self._rays_seen: Optional[dict] = None  # the snapshots' ray counts last checked against scan_order
+        self._block_order = False  # ... whether their scans follow one another in scan_order already
         self.n_ranges = ranges_offset
         self._ray_entity = np.concatenate(ray_entity) if ray_entity else np.zeros(0, np.intp)
         self._ray_angle = np.concatenate(ray_angle) if ray_angle else np.zeros(0, np.float64)
@@ -267,7 +269,14 @@ class StateMessages:
         """Every scan's ranges in publishing order, +inf where nothing was hit (REP 117), float32."""
         if not self.scan_order:
             return np.zeros(0, np.float32)
-        ranges = np.concatenate([snap.scans[i][j] for i, j in self.scan_order]).astype(np.float32, copy=False)
+        if snap.rays is not self._rays_seen:  # the same dict every step: checked once
+            self._rays_seen = snap.rays
+            order = [(i, j) for i, counts in snap.rays.items() for j in range(len(counts))]
+            self._block_order = order == self.scan_order
+        if self._block_order:  # every scan end to end already: no slice per lidar
+            ranges = snap.scan_block.astype(np.float32, copy=False)
+        else:
+            ranges = np.concatenate([snap.scans[i][j] for i, j in self.scan_order]).astype(np.float32, copy=False)
         return np.where(ranges >= self._scan_max, np.float32(np.inf), ranges).astype(np.float32)
 
     def points(self, snap: convert.Snapshot, ranges: np.ndarray) -> np.ndarray:

@@ -104,9 +104,12 @@ class StepLoop:
         """What ``env.step`` gets: a swarm's (no per-agent topics) actions stacked in one tensor, so that
         neither the step nor its observations and rewards cost a call per agent (they come back stacked
         too, and are read row by row like the lists); a small team's list, as VMAS takes it."""
-        if self.per_agent or not actions or any(a.shape != actions[0].shape for a in actions):
+        if self.per_agent or not actions:
             return actions
-        return torch.stack(actions)
+        try:
+            return torch.stack(actions)
+        except RuntimeError:  # sizes differ between agents (or one is wrong): the list, checked agent by agent
+            return actions
 
     def _emit_step(self, step: ComputedStep) -> None:
         try:

@@ -49,10 +49,17 @@ class EnvVector:
     finite: Optional[bool] = None
 
 
-def gather(world, env_index: int, lidars: Sequence) -> np.ndarray:
-    """:attr:`EnvVector.values` of env ``env_index`` from the current state, with one device-to-host copy."""
+def gather(world, env_index: int, lidars: Sequence, one_layout: Optional[bool] = None) -> np.ndarray:
+    """:attr:`EnvVector.values` of env ``env_index`` from the current state, with one device-to-host copy.
+    ``one_layout``: whether the lidars share one ray count (worked out when not given)."""
     with torch.no_grad():
-        readings = [lidar.measure()[env_index].reshape(-1) for lidar in lidars]
+        if one_layout is None:
+            one_layout = len({lidar.n_rays for lidar in lidars}) == 1
+        if len(lidars) > 1 and one_layout:
+            # one stacked read for all (a swarm's thousand measure() calls cost more than its cast)
+            readings = [lidars[0].stacked_measure(lidars)[:, env_index].reshape(-1)]
+        else:
+            readings = [lidar.measure()[env_index].reshape(-1) for lidar in lidars]
         q, v = world.planar_state()  # right after a step: its own output, no copy
         state = torch.cat([q[:, :, env_index], v[:, :, env_index]])  # [6, N]
         return torch.cat([state.reshape(-1)] + [r.to(state.dtype) for r in readings]).cpu().numpy()
@@ -89,6 +96,7 @@ class EnvSnapshot:
         self._world = world
         self._lidars: List = list(lidars)
         rays = max((lidar.n_rays for lidar in self._lidars), default=1)
+        self._one_layout = len({lidar.n_rays for lidar in self._lidars}) == 1
         self.rides_along = bool(world.physics_compiled) and world.batch_dim * rays <= RIDE_ALONG_MAX_ELEMENTS
         self._handle: Optional[int] = None  # of the registered state kernel
         self._key: Optional[tuple] = None  # lidar_batch.lidar_layout() of the registered kernel
@@ -101,7 +109,7 @@ class EnvSnapshot:
             values = self._from_step(env_index)
             if values is not None:
                 return EnvVector(values[:-1], bool(values[-1]))
-        return EnvVector(gather(self._world, env_index, self._lidars))
+        return EnvVector(gather(self._world, env_index, self._lidars, self._one_layout))
 
     def _from_step(self, env_index: int) -> Optional[np.ndarray]:
         """The step's own vector (its last value the finiteness verdict), or None: gather it."""
