@@ -21,6 +21,7 @@ from vmas_ros.compat.spaces import space_types
 from vmas_ros.envs import actions as act
 from vmas_ros.envs import stacked as stacked_step
 from vmas_ros.envs.limits import check_world_size
+from vmas_ros.envs.memory import check_memory
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
 
@@ -83,6 +84,7 @@ class Environment:
         self._seed_rng(0 if seed is None else seed)
         with self._own_rng():
             self.world = scenario.env_make_world(num_envs, self.device, **kwargs)
+        check_memory(self.world, scenario)  # before the first reset or step allocates (envs/memory.py)
         self.agents = self.world.policy_agents
         self.n_agents = len(self.agents)
         self.steps = torch.zeros(num_envs, device=self.device)

@@ -125,7 +125,7 @@ class SimNode(StepLoop, Node):
         try:
             device = resolve_device(p.device)
             self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed, **p.kwargs())
-        except (ValueError, TypeError) as error:
+        except (ValueError, TypeError, MemoryError) as error:  # bad kwargs, or a world too large
             raise ConfigError(f"cannot build scenario {p.scenario!r}: {error}") from None
         world = self.env.world
         if p.add_lidar:
