@@ -48,3 +48,21 @@ def test_spawn_places_exactly_the_selected_envs_apart(selector):
     assert (gaps >= 0.2).all(), "entities at least min_dist apart in every selected env"
     if int(chosen.sum()) > 1:  # each selected env got its own draw, not one copied draw
         assert not torch.equal(placed[0], placed[1])
+
+
+def test_a_swarms_positions_are_drawn_at_once_every_two_apart(device):
+    from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES
+
+    world = World(batch_dim=3, device=device)
+    count, min_dist = 2 * GRID_MIN_SPHERES, 0.15
+    torch.manual_seed(0)
+    pos = ScenarioUtils.find_random_positions(count, None, world, min_dist, (-4.0, 4.0), (-3.5, 3.5))
+    assert pos.shape == (3, count, 2) and pos.device.type == torch.device(device).type
+    assert (pos[..., 0].abs() <= 4).all() and (pos[..., 1].abs() <= 3.5).all()
+    d = torch.linalg.vector_norm(pos.unsqueeze(2) - pos.unsqueeze(1), dim=-1)
+    d = d + torch.eye(count, device=pos.device) * 10
+    assert float(d.min()) >= min_dist
+    # crowded enough that plain uniform draws would have put some too close: the rounds redrew them
+    assert float(d.min()) < 2 * min_dist
+    # one env of several, as a partial reset asks
+    assert ScenarioUtils.find_random_positions(count, 1, world, min_dist, (-4.0, 4.0), (-3.5, 3.5)).shape == (1, count, 2)

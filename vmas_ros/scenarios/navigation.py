@@ -60,7 +60,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import configure, heuristic_kwargs, range_links, selected_rows
+from vmas_ros.scenarios.common import configure, heuristic_kwargs, range_links
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.neighbours import ClosePairs
@@ -159,19 +159,22 @@ class Scenario(BaseScenario):
         bounds = (self.world_spawning_x, self.world_spawning_y) if self.enforce_bounds else (None, None)
 
         world = World(batch_dim, device, substeps=SUBSTEPS, x_semidim=bounds[0], y_semidim=bounds[1])
-        for i in range(self.n_agents):
-            color = agent_color(i)
+        # the goals first: landmarks come before the agents in the world's rows, so added first each one
+        # is appended (added after the agents, each would move every agent's row)
+        goals = [Landmark(name=f"goal {i}", collide=False, color=agent_color(i), shape=Sphere(radius=GOAL_RADIUS))
+                 for i in range(self.n_agents)]
+        for goal in goals:
+            world.add_landmark(goal)
+        for i, goal in enumerate(goals):
             sensors = None
             if self.collisions:
                 sensors = [Lidar(world, n_rays=self.n_lidar_rays, max_range=self.lidar_range, entity_filter=is_agent)]
             agent = Agent(
-                name=f"agent_{i}", collide=self.collisions, color=color, shape=Sphere(radius=self.agent_radius),
+                name=f"agent_{i}", collide=self.collisions, color=agent_color(i), shape=Sphere(radius=self.agent_radius),
                 render_action=True, sensors=sensors,
             )
-            goal = Landmark(name=f"goal {i}", collide=False, color=color, shape=Sphere(radius=GOAL_RADIUS))
             agent.goal = goal
             world.add_agent(agent)
-            world.add_landmark(goal)
 
         self._slots = torch.tensor(
             goal_slots(self.n_agents, self.agents_with_same_goal, self.split_goals), device=world.device
@@ -194,20 +197,19 @@ class Scenario(BaseScenario):
     # ------------------------------------------------------------------- reset
     def reset_world_at(self, env_index=None) -> None:
         world = self.world
-        rows = selected_rows(world.batch_dim, env_index)
         x_bounds = (-self.world_spawning_x, self.world_spawning_x)
         y_bounds = (-self.world_spawning_y, self.world_spawning_y)
-        # agents first, then one goal draw per agent, each clear of all drawn before it: [rows, 2n, 2]
-        placed = torch.zeros(rows, 0, world.dim_p, device=world.device)
-        for _ in range(2 * self.n_agents):
-            point = ScenarioUtils.find_random_pos_for_entity(
-                placed, env_index, world, self.spawn_distance, x_bounds, y_bounds
-            )
-            placed = torch.cat([placed, point], dim=1)
+        # agents first, then one goal draw per agent, every two apart: [rows, 2n, 2]
+        placed = ScenarioUtils.find_random_positions(
+            2 * self.n_agents, env_index, world, self.spawn_distance, x_bounds, y_bounds)
         agents, goals = placed[:, : self.n_agents], placed[:, self.n_agents :][:, self._slots]
-        for i, agent in enumerate(world.agents):
-            agent.set_pos(shaped_for(agents[:, i], env_index), batch_index=env_index)
-            agent.goal.set_pos(shaped_for(goals[:, i], env_index), batch_index=env_index)
+        if env_index is None:  # every env: two writes, not two per agent
+            world.set_positions(world.agents, agents[..., 0].t(), agents[..., 1].t())
+            world.set_positions([a.goal for a in world.agents], goals[..., 0].t(), goals[..., 1].t())
+        else:
+            for i, agent in enumerate(world.agents):
+                agent.set_pos(shaped_for(agents[:, i], env_index), batch_index=env_index)
+                agent.goal.set_pos(shaped_for(goals[:, i], env_index), batch_index=env_index)
         shaping = torch.linalg.vector_norm(agents - goals, dim=-1) * self.pos_shaping_factor
         if env_index is None:
             self.pos_shaping = shaping

@@ -250,11 +250,12 @@ def build_pairs(world, entities, grouped: Sequence[int] = ()) -> List[PairTable]
     ``grouped`` entities are left to their :class:`SphereGroup`."""
     buckets: Dict[Tuple[str, str], list] = {kind: [] for kind in PAIR_KINDS}
     in_group = set(grouped)
-    others = [i for i in range(len(entities)) if i not in in_group]
+    colliding = [i for i, e in enumerate(entities) if e._collide]  # no pair without both (goals, marks)
+    others = [i for i in colliding if i not in in_group]
     if not in_group:
-        found = itertools.combinations(range(len(entities)), 2)
+        found = itertools.combinations(colliding, 2)
     else:  # only pairs with a member outside the group: |others| x N, not N^2
-        found = sorted((min(i, j), max(i, j)) for i in others for j in range(len(entities))
+        found = sorted((min(i, j), max(i, j)) for i in others for j in colliding
                        if j != i and (j in in_group or j > i))
     for i, j in found:
         a, b = entities[i], entities[j]

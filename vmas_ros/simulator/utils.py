@@ -259,6 +259,51 @@ class ScenarioUtils:
             entity.set_pos(pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
     @staticmethod
+    def find_random_positions(
+        count: int,
+        env_index,
+        world,
+        min_dist_between_entities: float,
+        x_bounds: Tuple[float, float],
+        y_bounds: Tuple[float, float],
+        disable_warn: bool = False,
+    ) -> Tensor:
+        """``count`` positions per selected env, ``[envs, count, 2]``, uniform in the bounds, every two at least
+        ``min_dist_between_entities`` apart.
+
+        A few are drawn one by one, each clear of those before it (``find_random_pos_for_entity`` in a
+        loop: VMAS's draws, from the same random stream). From ``GRID_MIN_SPHERES`` on they are drawn all at
+        once, and each one too close to an earlier one is drawn again, round after round, until none is: the
+        same rule, a few batched rounds instead of a Python call per position (a swarm's thousands).
+        """
+        from vmas_ros.simulator.neighbours import ClosePairs
+        from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES
+
+        rows = selected_env_count(world.batch_dim, env_index)
+        if count < GRID_MIN_SPHERES:
+            placed = torch.zeros(rows, 0, world.dim_p, device=world.device)
+            for _ in range(count):
+                point = ScenarioUtils.find_random_pos_for_entity(
+                    placed, env_index, world, min_dist_between_entities, x_bounds, y_bounds, disable_warn)
+                placed = torch.cat([placed, point], dim=1)
+            return placed
+        low = torch.tensor([x_bounds[0], y_bounds[0]], device=world.device, dtype=torch.float32)
+        high = torch.tensor([x_bounds[1], y_bounds[1]], device=world.device, dtype=torch.float32)
+        placed = low + (high - low) * torch.rand(rows, count, 2, device=world.device)
+        flat, close = placed.view(-1, 2), ClosePairs(min_dist_between_entities)
+        for tries in range(1, 1_000_000):
+            first, second = close(placed)
+            too_close = torch.linalg.vector_norm(flat[first] - flat[second], dim=-1) < min_dist_between_entities
+            again = torch.unique(second[too_close])  # the later of each pair too close
+            if again.numel() == 0:
+                return placed
+            flat[again] = low + (high - low) * torch.rand(again.numel(), 2, device=world.device)
+            if tries == 50_000 and not disable_warn:
+                warnings.warn("Spawning is taking many tries: the bounds or min_dist_between_entities "
+                              "may be too tight for all entities (disable_warn=True silences this).")
+        raise RuntimeError(f"no room for {count} entities {min_dist_between_entities} apart in the bounds")
+
+    @staticmethod
     def find_random_pos_for_entity(
         occupied_positions: Tensor,
         env_index: Optional[int],

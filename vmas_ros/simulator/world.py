@@ -198,6 +198,10 @@ class World:
         self._check_new_name(landmark)
         landmark._attach(self)
         self._landmarks.append(landmark)
+        # before any agent, a landmark is the last row too: appending it moves nothing (else the agents shift)
+        if not self._agents and self._state.append_entity(landmark):
+            self._invalidate_tables()
+            return
         self._entities_changed()
 
     def _entities_changed(self) -> None:
