@@ -237,7 +237,8 @@ class StateMessages:
         self._idx_points = np.concatenate(idx_points) if idx_points else np.zeros(0, np.intp)
         self._idx_stamp = np.array(idx_stamp, dtype=np.intp).reshape(-1, 8)
         self._scan_max = np.concatenate(self.scan_max) if self.scan_max else np.zeros(0, np.float32)
-        self._data = self.arena.tobytes()
+        self._bytes = self.arena.tobytes()
+        self._pending: Optional[tuple] = None  # (snapshot, stamp, colours) of a fill not yet written
 
     # -------------------------------------------------------------------- step
     def values(self, snap: convert.Snapshot) -> np.ndarray:
@@ -292,7 +293,19 @@ class StateMessages:
         return out
 
     def fill(self, snap: convert.Snapshot, stamp_ns: int, colours: Optional[np.ndarray] = None) -> None:
-        """Write one step into the arena: four scatters, whatever the number of agents."""
+        """Make one step the messages' content. The arena is written (four scatters, whatever the number of
+        agents) when the bytes are first asked for: a step nobody subscribes to or records costs nothing."""
+        self._pending = (snap, stamp_ns, colours)
+
+    @property
+    def _data(self) -> bytes:
+        """Every message's CDR bytes end to end, of the last ``fill``."""
+        if self._pending is not None:
+            self._write(*self._pending)
+            self._pending = None
+        return self._bytes
+
+    def _write(self, snap: convert.Snapshot, stamp_ns: int, colours: Optional[np.ndarray]) -> None:
         arena = self.arena
         arena[self._idx64] = self.values(snap)[self._src64].astype("<f8").view(np.uint8).reshape(-1, 8)
         if self._idx_ranges.size or self._idx_points.size:
@@ -305,7 +318,7 @@ class StateMessages:
             arena[self._idx32] = np.asarray(colours, dtype="<f4")[self._src32].view(np.uint8).reshape(-1, 4)
         stamp = np.array([stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000], dtype="<u4").view(np.uint8)
         arena[self._idx_stamp] = stamp
-        self._data = arena.tobytes()
+        self._bytes = arena.tobytes()
 
     def payloads(self) -> List[Tuple[str, str, bytes]]:
         """(topic as created, relative but /clock, type name, CDR bytes) of every message, in ``topics`` order."""
@@ -351,7 +364,11 @@ class StatePublisher:
             [p.publish for p in self.publishers]
 
     def publish(self, record: Optional[Callable[[str, str, bytes], None]] = None) -> None:
-        """Publish the last ``fill``; ``record(resolved topic, type name, bytes)`` gets each message too."""
+        """Publish the last ``fill``; ``record(resolved topic, type name, bytes)`` gets each message too.
+        With no subscriber on any of them and nothing to record, the messages are not even written (the
+        publishers are volatile: a message nobody is matched to is lost anyway)."""
+        if record is None and not any(p.get_subscription_count() for p in self.publishers):
+            return
         data, spans = self.messages._data, self.messages.spans
         for send, (a, b) in zip(self._send, spans):
             send(data[a:b])
