@@ -9,6 +9,8 @@ node of 1,000 agents and reads its topics from another process.
 """
 from __future__ import annotations
 
+import asyncio
+import base64
 import math
 import signal
 
@@ -25,7 +27,10 @@ from test.simulator.lidar_setup import randomise, with_lidars
 from vmas_ros.ros import convert
 from vmas_ros.ros.params import PER_AGENT_TOPICS_MAX_AGENTS, SimParams, validate
 from vmas_ros.ros.publish import StateMessages
+from test.foxglove_client import FoxClient
 from test.ros.conftest import READY_SERVICES, SimProcess
+from test.ros.test_sim_node_foxglove import _free_port
+from test.viz.protobuf_decode import decode, schema_descriptors
 
 pytestmark = pytest.mark.ros
 
@@ -109,10 +114,26 @@ SWARM_TOPICS = {"/clock": "rosgraph_msgs/msg/Clock", "/agents/poses": "geometry_
                 "/lidar/points": "sensor_msgs/msg/PointCloud2", "/agent_0/cmd_vel": "geometry_msgs/msg/Twist"}
 
 
+def _foxglove_scene(port: int) -> tuple:
+    """(the channels a Foxglove client is offered, the entities of one /scene message it receives)."""
+    async def session():
+        async with FoxClient(port) as client:
+            await client.wait_for(lambda: "/scene" in client.channels)
+            scene = await client.subscribe("/scene")
+            await client.wait_for(lambda: len(client.data.get(scene, [])) >= 1)
+            channel = client.channels["/scene"]
+            message = decode(schema_descriptors(base64.b64decode(channel["schema"])), channel["schemaName"],
+                             client.data[scene][0][1])
+            return set(client.channels), message["entities"]
+
+    return asyncio.run(asyncio.wait_for(session(), 60))
+
+
 def test_a_swarm_of_a_thousand_is_published_in_aggregated_topics(ros, sim_log_dir):
     poses = ros.collect(PoseArray, "/agents/poses", depth=50)
     cloud = ros.collect(PointCloud2, "/lidar/points", depth=5)
-    sim = SimProcess(ros, SWARM, sim_log_dir, "swarm")
+    port = _free_port()
+    sim = SimProcess(ros, {**SWARM, "foxglove_port": port}, sim_log_dir, "swarm")
     try:
         sim.wait_ready(SWARM_TOPICS, READY_SERVICES, timeout=180.0)  # building 1,000 agents takes a while
         topics = ros.topics()
@@ -125,6 +146,11 @@ def test_a_swarm_of_a_thousand_is_published_in_aggregated_topics(ros, sim_log_di
         assert len(points) >= N_SWARM and len(points) % N_SWARM == 0, len(points)
         hits = points[np.isfinite(points[:, 0])]
         assert len(hits) and np.all(np.abs(hits[:, :2]) <= HALF_SIDE + 1.0), "hits lie in the arena"
+
+        # a Foxglove client sees the whole swarm (agents and goals) in one scene, and no per-agent channel
+        channels, entities = _foxglove_scene(port)
+        assert len(entities) == 2 * N_SWARM and {"agent_0", f"agent_{N_SWARM - 1}"} <= {e["id"] for e in entities}
+        assert not [c for c in channels if c.startswith("/agent_")], sorted(channels)[:5]
 
         # agent_0 takes cmd_vel: it moves forward while the command lasts; the others stand still
         start = poses.latest.poses
