@@ -13,7 +13,7 @@ import math
 import pytest
 import torch
 
-from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
+from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.physics.collision.sphere_grid import candidate_pairs
 from vmas_ros.simulator.physics.spatial_hash import MIN_BUCKETS, NEAR_OFFSETS as _NEAR, table_size
 from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES, GRID_START_CAPACITY
@@ -24,9 +24,10 @@ def _world(device, n: int, grid: str, side: float, batch: int = 3, seed: int = 0
     world.sphere_grid = grid
     for i in range(n):
         world.add_agent(Agent(name=f"s{i}", shape=Sphere(radius=(0.05, 0.03, 0.08)[i % 3])))
-    if extras:  # outside the group: a static sphere, a box, and a sphere with a filter of its own
+    if extras:  # outside the group: a static sphere, a box, a wall, and a sphere with a filter of its own
         world.add_landmark(Landmark(name="post", shape=Sphere(radius=0.2), collide=True))
         world.add_landmark(Landmark(name="crate", shape=Box(length=0.4, width=0.3), collide=True, movable=True))
+        world.add_landmark(Landmark(name="wall", shape=Line(length=1.5), collide=True))
         world.add_agent(Agent(name="picky", shape=Sphere(radius=0.06), collision_filter=lambda e: e.name != "s0"))
     world.reset(None)
     generator = torch.Generator().manual_seed(seed)
@@ -64,8 +65,9 @@ def test_one_step_matches_every_pair(device, side, extras):
     if side < 1.0:
         assert group.capacity > GRID_START_CAPACITY, "a dense cluster outgrows the starting capacity"
     assert int(group.needed) <= group.capacity
-    if extras:
-        assert on.tables.pairs, "pairs with an entity outside the group keep their pair tables"
+    if extras:  # every shape pair with an entity outside the group keeps its pair table
+        kinds = {table.kind for table in on.tables.pairs}
+        assert {("sphere", "sphere"), ("box", "sphere"), ("line", "sphere")} <= kinds, kinds
 
 
 def test_trajectories_agree_on_a_sparse_swarm(device):
