@@ -259,15 +259,9 @@ class ScenarioUtils:
             entity.set_pos(pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
     @staticmethod
-    def find_random_positions(
-        count: int,
-        env_index,
-        world,
-        min_dist_between_entities: float,
-        x_bounds: Tuple[float, float],
-        y_bounds: Tuple[float, float],
-        disable_warn: bool = False,
-    ) -> Tensor:
+    def find_random_positions(count: int, env_index, world, min_dist_between_entities: float,
+                              x_bounds: Tuple[float, float], y_bounds: Tuple[float, float],
+                              disable_warn: bool = False) -> Tensor:
         """``count`` positions per selected env, ``[envs, count, 2]``, uniform in the bounds, every two at least
         ``min_dist_between_entities`` apart.
 
