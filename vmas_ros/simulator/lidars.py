@@ -8,6 +8,12 @@ So the first ``measure()`` in a state casts every lidar of the same layout
 others read their row. Scenarios, the ROS node and tools all just call
 ``measure()``; how it is cast is decided here and nowhere else:
 
+* a swarm, :data:`~vmas_ros.simulator.thresholds.GRID_MIN_LIDARS` or more lidars
+  that see one set of spheres through a layout-static filter: the grid cast
+  (``lidar_grid.GridCast``), each lidar's rays against the spheres within its
+  reach only, one ``[L, B, R]`` stack whose rows the lidars read. Equal to the
+  lidar alone to float rounding; no gradient is kept (a caller in grad mode
+  on a state that needs one gets the casts below);
 * the world compiles its physics and envs x rays is at most
   :data:`~vmas_ros.simulator.thresholds.COMPILED_LIDAR_BATCH_MAX_ELEMENTS`: one compiled function of the
   planar state for the whole batch (``lidar_batch.CompiledCast``; sphere
@@ -36,7 +42,9 @@ see ``World.ray_targets``); a filter that reads anything but the world's
 state must not change its answers within one state. A reading is shared by
 everyone who asks in that state: read-only, like ``planar_state``. One cast
 under ``no_grad`` is cast again for a caller in grad mode, so that
-differentiable envs keep their gradients.
+differentiable envs keep their gradients. A scenario that observes the whole
+swarm at once asks :meth:`LidarCaster.stacked_readings` (``Lidar.stacked_measure``)
+for every reading in one ``[L, B, R]`` tensor.
 
 The world's lidars hold the caster (``Lidar.measure`` finds it on the first
 of them that has one), so the world itself needs no LIDAR state.
