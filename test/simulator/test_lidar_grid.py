@@ -15,6 +15,7 @@ import torch
 
 from vmas_ros.simulator.core import Agent, Box, Landmark, Sphere, World
 from vmas_ros.simulator.lidar_grid import GRID_LIDAR_START_CAPACITY, grid_plan
+from vmas_ros.simulator.physics.spatial_hash import CELL_MARGIN
 from vmas_ros.simulator.sensors import Lidar, world_lidars
 from vmas_ros.simulator.thresholds import GRID_MIN_LIDARS
 
@@ -82,9 +83,9 @@ def test_grid_follows_the_state_and_the_agents_turning(device):
 
 def test_agents_on_cell_borders(device):
     world = _swarm(device, 100, 3.0, batch=1)
-    cell = world_lidars(world)[0]._world_caster()._grid  # plan made on the first cast
+    grid = world_lidars(world)[0]._world_caster()._grid  # plan made on the first cast
     _compare(world)
-    width = cell._plan.cell
+    width = grid._plan.reach * (1 + CELL_MARGIN)  # the side of the grid's cells
     # a row of agents exactly on cell borders, each within reach of the next
     for i, agent in enumerate(world.agents[:10]):
         agent.set_pos(torch.tensor([[i * width / 2, width]], device=device), batch_index=None)

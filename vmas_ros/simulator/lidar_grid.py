@@ -37,15 +37,12 @@ from torch import Tensor
 
 from vmas_ros.simulator import raycast
 from vmas_ros.simulator.lidar_batch import FILTER_CHANGES, layout_static
-from vmas_ros.simulator.physics.spatial_hash import candidates_near, grown_capacity
+from vmas_ros.simulator.physics.spatial_hash import candidates_within
 
 __all__ = ["GridCast", "GridPlan", "grid_plan", "GRID_LIDAR_START_CAPACITY"]
 
 #: room per lidar in the candidate list to start with; a cast that needs more grows it (never a lost hit)
 GRID_LIDAR_START_CAPACITY = 8
-#: the cell is widened by this fraction of the reach, so that float rounding of the cell coordinates never
-#: puts a sphere within reach two cells away from its lidar
-_CELL_MARGIN = 0.01
 
 
 @dataclass
@@ -59,7 +56,7 @@ class GridPlan:
     cos0: Tensor  # [L, R]: cosines of the rays' angles relative to the heading
     sin0: Tensor  # [L, R]
     max_range: float
-    cell: float
+    reach: float  # the farthest centre a ray can hit: max_range plus the largest radius
 
 
 def grid_plan(world, sensors: Sequence) -> Optional[GridPlan]:
@@ -70,22 +67,19 @@ def grid_plan(world, sensors: Sequence) -> Optional[GridPlan]:
         return None
     if not layout_static(sensors):
         return None
-    shared = _shared_targets(world, sensors)
-    if shared is not None:
-        union = shared
-        position = {id(e): i for i, e in enumerate(union)}
-        own = [position.get(id(s.agent), -1) for s in sensors]
-    else:
+    union = _shared_targets(world, sensors)
+    targets = None
+    if union is None:
         targets = [world.ray_targets(s.agent, s.entity_filter) for s in sensors]
         union_ids = set()
         for t in targets:
             union_ids.update(id(e) for e in t)
         union = [e for e in world.entities if id(e) in union_ids]
-        position = {id(e): i for i, e in enumerate(union)}
-        own = [position.get(id(s.agent), -1) for s in sensors]
-        # each lidar must see the whole union but its own body (which ray_targets never lists)
-        if any(len(t) != len(union) - (o >= 0) for t, o in zip(targets, own)):
-            return None
+    position = {id(e): i for i, e in enumerate(union)}
+    own = [position.get(id(s.agent), -1) for s in sensors]
+    # each lidar must see the whole union but its own body (which ray_targets never lists)
+    if targets is not None and any(len(t) != len(union) - (o >= 0) for t, o in zip(targets, own)):
+        return None
     if not union or any(e.shape.kind != "sphere" for e in union):
         return None
     slot = {id(e): i for i, e in enumerate(world.entities)}
@@ -97,8 +91,7 @@ def grid_plan(world, sensors: Sequence) -> Optional[GridPlan]:
         origins=torch.tensor([slot[id(s.agent)] for s in sensors], device=device),
         targets=torch.tensor([slot[id(e)] for e in union], device=device),
         own=torch.tensor(own, device=device, dtype=torch.int32),
-        radius=radius, cos0=torch.cos(angles), sin0=torch.sin(angles), max_range=max_range,
-        cell=reach * (1 + _CELL_MARGIN),
+        radius=radius, cos0=torch.cos(angles), sin0=torch.sin(angles), max_range=max_range, reach=reach,
     )
 
 
@@ -129,12 +122,7 @@ def grid_cast(q: Tensor, plan: GridPlan, capacity: int) -> tuple:
     n_lidars, n_targets, batch = plan.origins.shape[0], plan.targets.shape[0], q.shape[2]
     ox, oy = _env_major(q[0], plan.origins), _env_major(q[1], plan.origins)  # [B * L]
     tx, ty = _env_major(q[0], plan.targets), _env_major(q[1], plan.targets)  # [B * E]
-    while True:
-        found = candidates_near(ox, oy, n_lidars, tx, ty, n_targets, plan.cell, capacity)
-        needed = int(found.needed)
-        if needed <= capacity:
-            break
-        capacity = grown_capacity(needed)
+    found, capacity = candidates_within(ox, oy, n_lidars, tx, ty, n_targets, plan.reach, capacity)
     query, target = found.query, found.target
     member = target.remainder(n_targets)
     valid = found.valid & (member != torch.index_select(plan.own, 0, query.remainder(n_lidars)))

@@ -119,7 +119,7 @@ class LidarCaster:
         if readings is None:  # not castable together, or too large to: this one alone
             batch, readings = [sensor], [sensor.cast_alone()]
         if isinstance(readings, torch.Tensor):  # a grid cast: rows of one stack
-            self._stack = (batch, {s: i for i, s in enumerate(batch)}, grad, readings)
+            self._stack = (batch, self._rows_of(batch)[0], grad, readings)
             self._state = (world.planar_state()[0], world.tables)
             return readings[self._stack[1][sensor]]
         for member, reading in zip(batch, readings):
@@ -147,19 +147,25 @@ class LidarCaster:
         stack = self._stack
         if stack is not None and (stack[2] or not grad) and stack[0] == sensors:
             return stack[3]
-        known = self._swarm
-        if known is None or known[0] != sensors:  # a new list of lidars: its rows and whether it is one layout
-            known = self._swarm = (sensors, {s: i for i, s in enumerate(sensors)},
-                                   len({_layout(s) for s in sensors}) == 1)
+        rows, one_layout = self._rows_of(sensors)
         self._asked.update(sensors)
         self._asked_ever.update(sensors)
-        readings = self._cast(world, sensors) if known[2] else None
+        readings = self._cast(world, sensors) if one_layout else None
         if readings is None:
             readings = [self.reading(s) for s in sensors]
         stacked = readings if isinstance(readings, torch.Tensor) else torch.stack(readings)
-        self._stack = (sensors, known[1], grad, stacked)
+        self._stack = (sensors, rows, grad, stacked)
         self._state = (world.planar_state()[0], world.tables)
         return stacked
+
+    def _rows_of(self, sensors: List) -> Tuple[Dict[object, int], bool]:
+        """``(lidar -> row, whether they share one layout)`` of a list of lidars, worked out once per list
+        (a swarm's casts take the same list state after state)."""
+        known = self._swarm
+        if known is None or known[0] != sensors:
+            known = self._swarm = (list(sensors), {s: i for i, s in enumerate(sensors)},
+                                   len({_layout(s) for s in sensors}) == 1)
+        return known[1], known[2]
 
     @staticmethod
     def _usable(kept: Optional[tuple], sensor, grad: bool) -> bool:

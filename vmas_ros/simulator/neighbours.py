@@ -15,14 +15,10 @@ from typing import Tuple
 import torch
 from torch import Tensor
 
-from vmas_ros.simulator.physics.spatial_hash import candidates_near, grown_capacity
+from vmas_ros.simulator.physics.spatial_hash import candidates_within
 from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES, GRID_START_CAPACITY
 
 __all__ = ["ClosePairs"]
-
-#: the hash's cells are this much wider than the distance asked for, so that float rounding of the cell
-#: coordinates never puts a close pair two cells apart
-_CELL_MARGIN = 0.01
 
 
 class ClosePairs:
@@ -58,12 +54,6 @@ class ClosePairs:
 
     def _hashed(self, flat: Tensor, n: int) -> Tuple[Tensor, Tensor]:
         x, y = flat[:, 0].contiguous(), flat[:, 1].contiguous()
-        cell = self.within * (1 + _CELL_MARGIN)
-        while True:
-            found = candidates_near(x, y, n, x, y, n, cell, self.capacity)
-            needed = int(found.needed)
-            if needed <= self.capacity:
-                break
-            self.capacity = grown_capacity(needed)
+        found, self.capacity = candidates_within(x, y, n, x, y, n, self.within, self.capacity)
         keep = found.valid & (found.target > found.query)
         return found.query[keep].long(), found.target[keep].long()

@@ -32,7 +32,8 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-__all__ = ["Candidates", "MIN_BUCKETS", "NEAR_OFFSETS", "candidates_near", "grown_capacity", "table_size"]
+__all__ = ["CELL_MARGIN", "Candidates", "MIN_BUCKETS", "NEAR_OFFSETS", "candidates_near", "candidates_within",
+           "grown_capacity", "table_size"]
 
 #: cell coordinates are clamped to +-_LIMIT (points farther out share the edge cells: still exact,
 #: only more candidates there), which keeps the hash's products inside an int64
@@ -44,6 +45,9 @@ _LIMIT = (1 << 20) - 2
 #: (test_sphere_grid.py checks the property)
 _PRIME_X, _PRIME_Y, _PRIME_ENV = 73856093, 19349663, 83492791
 MIN_BUCKETS = 16
+#: cells are this fraction wider than the distance asked for, so that float rounding of the cell coordinates
+#: never puts a point within that distance two cells away
+CELL_MARGIN = 0.01
 #: the nine neighbour cells' offsets in the hash, dx varying fastest; the query's own cell is entry 4
 NEAR_OFFSETS = tuple(dx * _PRIME_X + dy * _PRIME_Y for dy in (-1, 0, 1) for dx in (-1, 0, 1))
 
@@ -129,3 +133,17 @@ def candidates_near(qx: Tensor, qy: Tensor, queries_per_env: int, tx: Tensor, ty
                   == target.div(targets_per_env, rounding_mode="floor"))
     return Candidates(query, target, valid, needed)
 
+
+
+def candidates_within(qx: Tensor, qy: Tensor, queries_per_env: int, tx: Tensor, ty: Tensor, targets_per_env: int,
+                      within: float, capacity: int):
+    """``(candidates, capacity)``: :func:`candidates_near` with cells ``within`` wide (plus
+    :data:`CELL_MARGIN`), asked again with more room while the list needs more than it has (one host read
+    per call). ``capacity`` is the room the list ended up with: keep it for the next call."""
+    cell = within * (1 + CELL_MARGIN)
+    while True:
+        found = candidates_near(qx, qy, queries_per_env, tx, ty, targets_per_env, cell, capacity)
+        needed = int(found.needed)
+        if needed <= capacity:
+            return found, capacity
+        capacity = grown_capacity(needed)
