@@ -49,16 +49,14 @@ CAST_FLOATS = 3
 GRID_LIDAR_CANDIDATES, GRID_LIDAR_FLOATS = 8, 6
 
 
-def _pairs(world) -> int:
+def _pairs(world, members: int) -> int:
     """Pairs of colliding entities the pair tables would list, counted without building them: every pair of
-    collidable entities of which at least one can move, less the spheres the spatial hash takes."""
-    from vmas_ros.simulator.tables import _grid_members
-
+    collidable entities of which at least one can move, less those among the ``members`` spheres the
+    spatial hash takes."""
     collidable = [e for e in world.entities if e._collide]
     movable = sum(1 for e in collidable if e.movable)
     fixed = len(collidable) - movable
     pairs = movable * (movable - 1) // 2 + movable * fixed
-    members = len(_grid_members(world, world.entities))
     return max(0, pairs - members * (members - 1) // 2)
 
 
@@ -82,11 +80,11 @@ def estimate_step_bytes(world) -> Dict[str, int]:
     ``grid``, ``lidars`` (bytes)."""
     from vmas_ros.simulator.tables import _grid_members
 
-    batch = world.batch_dim
+    batch, members = world.batch_dim, len(_grid_members(world, world.entities))
     return {
         "state": 4 * STATE_FLOATS * len(world.entities) * batch,
-        "contacts": 4 * PAIR_FLOATS * _pairs(world) * batch,
-        "grid": GRID_BYTES * len(_grid_members(world, world.entities)) * batch,
+        "contacts": 4 * PAIR_FLOATS * _pairs(world, members) * batch,
+        "grid": GRID_BYTES * members * batch,
         "lidars": _lidar_bytes(world, batch),
     }
 
@@ -137,8 +135,6 @@ def check_memory(world, scenario=None) -> None:
     names the ``scenario`` (its module), the envs and the agents."""
     if os.environ.get(ALLOW_ENV) == "1":
         return
-    name = type(scenario).__module__.rsplit(".", 1)[-1] if scenario is not None else "the world"
-    what = f"{name} with {world.batch_dim:,} envs and {len(world.agents):,} agents"
     room = available_bytes(world.device)
     if room is None:
         return
@@ -146,7 +142,9 @@ def check_memory(world, scenario=None) -> None:
     need = sum(parts.values())
     if need <= room:
         return
-    detail = ", ".join(f"{name} {_gb(value)}" for name, value in parts.items() if value)
+    detail = ", ".join(f"{part} {_gb(value)}" for part, value in parts.items() if value)
+    name = type(scenario).__module__.rsplit(".", 1)[-1] if scenario is not None else "the world"
+    what = f"{name} with {world.batch_dim:,} envs and {len(world.agents):,} agents"
     raise MemoryError(
         f"{what} needs at least {_gb(need)} of memory per step ({detail}), but {_gb(room)} is available on "
         f"{world.device}; use fewer envs or agents (colliding pairs grow with the square of the agents), "

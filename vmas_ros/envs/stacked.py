@@ -33,7 +33,7 @@ from vmas_ros.simulator.dynamics.holonomic import Holonomic
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils
 
-__all__ = ["collect_stacked", "set_stacked_forces", "stackable", "step_results"]
+__all__ = ["set_stacked_forces", "stackable", "step_results"]
 
 
 def _holonomic_swarm(env) -> bool:
@@ -70,9 +70,10 @@ def set_stacked_forces(env, stacked: Tensor) -> bool:
 
 
 def stackable(env) -> bool:
-    """Whether this step's actions went in as one block (then the scenario's per-agent
-    ``process_action`` and dynamics calls are skipped: they would do nothing more)."""
-    return env.__dict__.get("_holonomic_swarm", False) is True and env.world._actions.u_rows is not None
+    """Whether this step's actions went in as one block (:func:`set_stacked_forces`; ``_set_actions``
+    withdraws the block first every step): then the scenario's per-agent ``process_action`` and dynamics
+    calls are skipped, as they would do nothing more."""
+    return env.world._actions.u_rows is not None
 
 
 def _stack(values: List[Tensor]) -> Optional[Tensor]:
@@ -101,40 +102,27 @@ def _stack_infos(infos: List[dict]):
     return stacked
 
 
-def collect_stacked(env, get_obs: bool, get_infos: bool):
-    """``(obs, rewards, infos)`` of every agent, stacked (see the module docstring); rewards first, as the
-    list collection does (scenarios may cache work in ``reward``)."""
+def step_results(env) -> tuple:
+    """The stacked step's return: ``obs, rews, dones, infos`` (``obs, rews, terminated, truncated, infos``
+    with ``terminated_truncated``), every agent's stacked (see the module docstring). Rewards first, as the
+    list collection does: scenarios may cache work in ``reward``."""
     scenario, agents = env.scenario, env.agents
     hook = getattr(scenario, "stacked_rewards", None)
     rewards = hook() if hook is not None else None
-    if rewards is None:
-        rewards = torch.stack([scenario.reward(agent) for agent in agents])
-    else:
-        rewards = rewards.clone()
-    obs = infos = None
-    if get_obs:
-        hook = getattr(scenario, "stacked_observations", None)
-        obs = hook() if hook is not None else None
+    rewards = torch.stack([scenario.reward(agent) for agent in agents]) if rewards is None else rewards.clone()
+    hook = getattr(scenario, "stacked_observations", None)
+    obs = hook() if hook is not None else None
+    if obs is None:
+        per_agent = [scenario.observation(agent) for agent in agents]
+        obs = _stack(per_agent)
         if obs is None:
-            per_agent = [scenario.observation(agent) for agent in agents]
-            obs = _stack(per_agent)
-            if obs is None:
-                obs = per_agent if scenario.fresh_observations else [TorchUtils.recursive_clone(o) for o in per_agent]
-        if isinstance(scenario, BaseScenario):
-            scenario.env_observations_handed_out()
-    if get_infos:
-        hook = getattr(scenario, "stacked_infos", None)
-        infos = hook() if hook is not None else None
-        if infos is None:
-            infos = _stack_infos([scenario.info(agent) for agent in agents])
-    return obs, rewards, infos
-
-
-
-def step_results(env) -> tuple:
-    """The stacked step's return: ``obs, rews, dones, infos`` (``obs, rews, terminated, truncated, infos``
-    with ``terminated_truncated``)."""
-    obs, rewards, infos = collect_stacked(env, True, True)
+            obs = per_agent if scenario.fresh_observations else [TorchUtils.recursive_clone(o) for o in per_agent]
+    if isinstance(scenario, BaseScenario):
+        scenario.env_observations_handed_out()
+    hook = getattr(scenario, "stacked_infos", None)
+    infos = hook() if hook is not None else None
+    if infos is None:
+        infos = _stack_infos([scenario.info(agent) for agent in agents])
     if env.terminated_truncated:
         terminated, truncated = env._done()
         return obs, rewards, terminated, truncated, infos
