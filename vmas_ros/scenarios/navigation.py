@@ -55,6 +55,7 @@ Deviations from VMAS 1.5
 from __future__ import annotations
 
 import colorsys
+from typing import Optional
 
 import torch
 from torch import Tensor
@@ -183,8 +184,13 @@ class Scenario(BaseScenario):
         #: the collision term's candidates: pairs of agents close enough to touch (a little margin: the
         #: exact test is the reward's own)
         self._close = ClosePairs((2 * self.agent_radius + TOUCH_DISTANCE) * (1 + 1e-3))
-        #: what the stacked results were computed for: (planar state, tables, hand-outs so far) -> value
-        self._cache: dict = {}
+        #: the agents' and their goals' rows in the world's stacked state, each [n]; the agents' lidars
+        slot = {id(e): i for i, e in enumerate(world.entities)}
+        self._agent_rows = torch.tensor([slot[id(a)] for a in world.agents], device=world.device)
+        self._goal_rows = torch.tensor([slot[id(a.goal)] for a in world.agents], device=world.device)
+        self._lidars = [agent.sensors[0] for agent in world.agents] if self.collisions else []
+        #: the stacked observations and what they were computed for: (planar state, tables, hand-outs so far)
+        self._obs_cache: Optional[tuple] = None
         #: per env [B, n]: each agent's distance to its goal x pos_shaping_factor, as of the last reward
         self.pos_shaping = torch.zeros(batch_dim, self.n_agents, device=world.device)
         #: the last reward's terms: per agent [B, n] (shaping, collisions), per env [B] (team shaping, final)
@@ -217,23 +223,11 @@ class Scenario(BaseScenario):
             self.pos_shaping[env_index] = shaped_for(shaping, env_index)
 
     # ------------------------------------------------------------------ reward
-    def _rows(self) -> tuple[Tensor, Tensor]:
-        """The agents' and their goals' rows in the world's stacked state, each [n] (fixed after make_world)."""
-        rows = self._cache.get("rows")
-        if rows is None:
-            slot = {id(e): i for i, e in enumerate(self.world.entities)}
-            device = self.world.device
-            rows = self._cache["rows"] = (
-                torch.tensor([slot[id(a)] for a in self.world.agents], device=device),
-                torch.tensor([slot[id(a.goal)] for a in self.world.agents], device=device),
-            )
-        return rows
-
     def _positions(self) -> tuple[Tensor, Tensor]:
         """Agents' and their goals' positions, each [B, n, 2]."""
         pos = self.world.stacked_state("pos")  # [N, B, 2]
-        agents, goals = self._rows()
-        return pos.index_select(0, agents).transpose(0, 1), pos.index_select(0, goals).transpose(0, 1)
+        return (pos.index_select(0, self._agent_rows).transpose(0, 1),
+                pos.index_select(0, self._goal_rows).transpose(0, 1))
 
     def _collision_counts(self, pos: Tensor) -> Tensor:
         """How many other agents each agent touches (surfaces within TOUCH_DISTANCE): [B, n].
@@ -250,11 +244,9 @@ class Scenario(BaseScenario):
         centres = torch.linalg.vector_norm(flat[first] - flat[second], dim=-1)
         pair = (first % n) * n + second % n  # the same two agents in every env
         in_play = torch.isin(pair, pair[centres <= reach])
-        hit = in_play & (centres - reach <= TOUCH_DISTANCE)
+        hit = (in_play & (centres - reach <= TOUCH_DISTANCE)).long()
         counts = torch.zeros(batch * n, dtype=torch.long, device=pos.device)
-        ones = torch.ones_like(first[hit])
-        counts.index_add_(0, first[hit], ones).index_add_(0, second[hit], ones)
-        return counts.view(batch, n)
+        return counts.index_add_(0, first, hit).index_add_(0, second, hit).view(batch, n)
 
     def _all_rewards(self) -> Tensor:
         """Every agent's reward [B, n]; caches the terms ``info`` reports."""
@@ -288,26 +280,23 @@ class Scenario(BaseScenario):
         """Every agent's observation [n, B, width], computed once per state and hand-out; ``observation`` reads
         its row, so both forms give the same values."""
         world = self.world
-        key = (world.planar_state()[0], world.tables, self.env_observations_handed_out_count)
-        cached = self._cache.get("obs")
-        if cached is not None and cached[0][0] is key[0] and cached[0][1] is key[1] and cached[0][2] == key[2]:
-            return cached[1]
-        agents, goal_rows = self._rows()
+        state, tables, handed_out = world.planar_state()[0], world.tables, self.env_observations_handed_out_count
+        cached = self._obs_cache
+        if cached is not None and cached[0] is state and cached[1] is tables and cached[2] == handed_out:
+            return cached[3]
         pos_all = world.stacked_state("pos")
-        pos, vel = pos_all.index_select(0, agents), world.stacked_state("vel").index_select(0, agents)  # [n, B, 2]
-        goals = pos_all.index_select(0, goal_rows)
+        pos = pos_all.index_select(0, self._agent_rows)  # [n, B, 2]
+        vel = world.stacked_state("vel").index_select(0, self._agent_rows)
+        goals = pos_all.index_select(0, self._goal_rows)
         if self.observe_all_goals:  # own position minus every agent's goal, in agent order: [n, B, 2n]
             to_goals = (pos.unsqueeze(2) - goals.transpose(0, 1).unsqueeze(0)).flatten(2)
         else:
             to_goals = pos - goals
         parts = [pos, vel, to_goals]
         if self.collisions:
-            lidars = self._cache.get("lidars")
-            if lidars is None:
-                lidars = self._cache["lidars"] = [agent.sensors[0] for agent in world.agents]
-            parts.append(self.lidar_range - lidars[0].stacked_measure(lidars))
+            parts.append(self.lidar_range - self._lidars[0].stacked_measure(self._lidars))
         obs = torch.cat(parts, dim=-1)
-        self._cache["obs"] = (key, obs)
+        self._obs_cache = (state, tables, handed_out, obs)
         return obs
 
     def observation(self, agent: Agent) -> Tensor:
