@@ -68,6 +68,6 @@ _ZEROS: dict = {}
 def _broadcast_shape(a: Tensor, b) -> Tuple[int, ...]:
     if not isinstance(b, Tensor) or b.shape == a.shape:
         return tuple(a.shape)
-    if torch.compiler.is_compiling():  # the plain-Python loop breaks the compiled graph
+    if torch.compiler.is_dynamo_compiling():  # the plain-Python loop breaks the compiled graph
         return tuple(torch.broadcast_shapes(a.shape, b.shape))
     return geo.broadcast_shape(a.shape, b.shape)

@@ -117,7 +117,7 @@ class Pushes:
     def __init__(self, dx: Tensor, dy: Tensor, reach: Tensor, params, length: Callable = norm_xy) -> None:
         near = mask_le(length(dx, dy), reach)
         if params.broad_phase == "batch":
-            near = near_in_any_env(near) if torch.compiler.is_compiling() else near.amax(dim=1, keepdim=True)
+            near = near_in_any_env(near) if torch.compiler.is_dynamo_compiling() else near.amax(dim=1, keepdim=True)
         self.gate, self.length = near, length
         self.strength, self.margin = params.collision_force, params.contact_margin
 
