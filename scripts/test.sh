@@ -17,6 +17,8 @@ case "$VENV" in /*) ;; *) VENV="$ROOT/$VENV" ;; esac
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( RANDOM % 100 + 1 ))}"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
+# eager physics for the envs the tests build (the default mode compiles each; see test/conftest.py)
+export VMAS_ROS_COMPILE="${VMAS_ROS_COMPILE:-0}"
 export PATH="$VENV/bin:$PATH"
 echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE" \
      "RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"

@@ -28,6 +28,10 @@ def pytest_configure(config):
     # inherit the environment): no test ever talks to another host.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    # Eager physics unless a test asks for compiling: the default mode compiles every new env's
+    # step (seconds each); the tests of that default set it themselves (test_compile_default.py).
+    # Nodes and scripts the tests start inherit it.
+    os.environ.setdefault("VMAS_ROS_COMPILE", "0")
     # A ROS process that an earlier run (or a test) killed while it set up Fast DDS's
     # shared memory leaves a segment every later node waits for forever, inside Fast
     # DDS where no Python timeout reaches; test/ros/conftest.py sweeps again before

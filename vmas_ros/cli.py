@@ -81,6 +81,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     policy = make_heuristic(args.scenario, **kwargs)
     print(f"scenario {args.scenario}: {env.n_agents} agents, {len(env.world.landmarks)} landmarks, "
           f"{args.num_envs} envs on {env.device}, {args.steps} steps")
+    if env.world.physics_compiled:  # the default mode: compile before timing, and say why the wait
+        print("compiling the physics step with torch.compile (once; VMAS_ROS_COMPILE=0 runs eagerly) ...",
+              flush=True)
+        start = time.perf_counter()
+        env.step([env.get_random_action(agent) for agent in env.agents])
+        env.reset()
+        print(f"compiled in {time.perf_counter() - start:.1f} s")
     start = time.perf_counter()
     heuristic_return = _rollout(env, policy, args.steps, progress=not args.quiet)
     elapsed = time.perf_counter() - start
@@ -115,8 +122,9 @@ def cmd_render(args: argparse.Namespace) -> int:
         print(f"vmas-ros render: --out must end in {', '.join(VIDEO_SUFFIXES)}, got {out.name!r}", file=sys.stderr)
         return 2
     try:
+        # eager: rendering one env costs far more than its steps, and compiling would delay the first frame
         env = vmas_ros.make_env(args.scenario, num_envs=1, device=args.device, seed=args.seed,
-                                **_parse_kwargs(args.scenario_kwargs))
+                                compile_physics=False, **_parse_kwargs(args.scenario_kwargs))
     except ValueError as error:
         print(f"vmas-ros render: {error}", file=sys.stderr)
         return 2

@@ -65,7 +65,7 @@ def test_compiled_lidar_equals_eager(device):
         torch.testing.assert_close(got, expected, atol=1e-5, rtol=1e-5)
     # some rays hit an obstacle, so the comparison is not between two all-max readings
     assert (expected < agent_e.sensors[0].max_range).any()
-    assert compiled.world._ray_kernels["sphere"] is not eager.world._ray_kernels["sphere"]
+    assert compiled.world._compiled.ray_kernels["sphere"] is not eager.world._compiled.ray_kernels["sphere"]
 
 
 @pytest.mark.slow
@@ -84,7 +84,7 @@ def test_the_compiled_step_is_one_graph_from_the_first_step(device, num_envs):
     # a state kernel
     assert counters["stats"]["unique_graphs"] - graphs == 1
     assert sum(counters["graph_break"].values()) == breaks
-    assert all(copy.one_graph for copy in env.world._physics_step._copies.values())
+    assert all(copy.one_graph for copy in env.world._compiled.step._copies.values())
 
 
 @pytest.mark.slow
@@ -164,7 +164,7 @@ def test_compiled_step_checks_only_its_inputs_and_recompiles_for_a_new_layout(de
     gen = torch.Generator(device="cpu").manual_seed(2)
     actions = [[(torch.rand(4, 2, generator=gen) * 2 - 1).to(device) for _ in eager.agents] for _ in range(4)]
     torch.testing.assert_close(_rollout(compiled, actions), _rollout(eager, actions), atol=1e-5, rtol=1e-4)
-    steps = compiled.world._physics_step
+    steps = compiled.world._compiled.step
     (copy,) = steps._copies.values()
     assert copy.one_graph, "guards are cut only for one-graph copies"
     code = (getattr(copy._compiled, "_torchdynamo_orig_callable", None) or copy._compiled.__wrapped__).__code__
@@ -177,7 +177,7 @@ def test_compiled_step_checks_only_its_inputs_and_recompiles_for_a_new_layout(de
         env.agents[0].mass = 3.0
         env.world.broad_phase = "env"
     torch.testing.assert_close(_rollout(compiled, actions), _rollout(eager, actions), atol=1e-5, rtol=1e-4)
-    assert compiled.world._physics_step._copies and copy not in compiled.world._physics_step._copies.values()
+    assert compiled.world._compiled.step._copies and copy not in compiled.world._compiled.step._copies.values()
     moved = [env.agents[0].state.pos.clone() for env in (eager, compiled)]
     torch.testing.assert_close(moved[1], moved[0], atol=1e-5, rtol=1e-4)
 

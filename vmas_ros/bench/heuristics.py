@@ -105,7 +105,8 @@ def evaluate_scenario(
     kwargs = {**score_kwargs, **(scenario_kwargs or {})}
     results = []
     for label in ("heuristic", "random"):
-        env = vmas_ros.make_env(name, num_envs=num_envs, device=device, seed=seed, **kwargs)
+        env = vmas_ros.make_env(name, num_envs=num_envs, device=device, seed=seed, compile_physics=False,
+                                **kwargs)  # eager: scores, not speed, and VMAS's heuristics score the same steps
         policy = make_heuristic(name, **kwargs) if label == "heuristic" else None
         score = torch.zeros(num_envs, device=env.device)
 

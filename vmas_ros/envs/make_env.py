@@ -6,6 +6,7 @@ from enum import Enum
 from typing import Any, Dict, Optional, Tuple, Union
 
 from vmas_ros.envs.environment import Environment
+from vmas_ros.simulator.compile_default import resolve_compile
 from vmas_ros.simulator import core as _engine  # noqa: F401  every env needs the engine: load it with make_env
 from vmas_ros.simulator.scenario import BaseScenario
 
@@ -62,7 +63,7 @@ def make_env(
     grad_enabled: bool = False,
     terminated_truncated: bool = False,
     wrapper_kwargs: Optional[dict] = None,
-    compile_physics: bool = False,
+    compile_physics: Optional[bool] = None,
     **kwargs,
 ) -> Any:
     """Create ``num_envs`` batched copies of ``scenario`` on ``device``.
@@ -74,15 +75,18 @@ def make_env(
     instead, built with ``wrapper_kwargs``; the gymnasium, pettingzoo and rllib
     ones always get ``terminated_truncated=True`` because those APIs report the
     two apart (VMAS asks the caller to pass it), while ``"gym"`` needs it False.
-    ``compile_physics=True`` runs the physics step through ``torch.compile``
-    (see ``World.compile_physics``: faster at large batch sizes, compiles on the
-    first step; not in VMAS).
+    ``compile_physics`` (not in VMAS): True runs the physics step through
+    ``torch.compile`` (``World.compile_physics``: compiles on the first step, for
+    seconds), False runs it eagerly (bit parity with VMAS), and None, the
+    default, compiles where a compiler for the device is present, as
+    ``VMAS_ROS_COMPILE`` says (see ``vmas_ros.simulator.compile_default``).
     """
     from vmas_ros.scenarios import load
 
     name = None if wrapper is None else wrapper_name(wrapper)  # a bad name fails before the world is built
     if name in _SPLIT_DONE:
         terminated_truncated = True
+    compiled = resolve_compile(compile_physics, device, num_envs)  # a bad value fails before the world is built too
 
     if isinstance(scenario, str):
         scenario = load(scenario)
@@ -104,7 +108,7 @@ def make_env(
         terminated_truncated=terminated_truncated,
         **kwargs,
     )
-    if compile_physics:
+    if compiled:
         env.world.compile_physics()
     if name is None:
         return env

@@ -15,9 +15,21 @@ import re
 import types
 from typing import Callable, Dict, Hashable, Optional, Sequence
 
+import sys
+
 import torch
 
-__all__ = ["own_copy", "compile_for_world", "LayoutCompiled", "StateFunction", "WorldKernel"]
+from vmas_ros.simulator.background_compile import BackgroundCompiler, copy_inputs
+
+__all__ = ["compile_failed", "own_copy", "compile_for_world", "LayoutCompiled", "StateFunction", "WorldKernel"]
+
+
+def compile_failed(error: BaseException) -> bool:
+    """Whether ``error`` is torch.compile failing to build code (no working compiler, say), not the
+    function's own error. Looked up lazily: importing torch._dynamo costs seconds, and only a compiled
+    call can raise it."""
+    dynamo_errors = sys.modules.get("torch._dynamo.exc")
+    return dynamo_errors is not None and isinstance(error, dynamo_errors.BackendCompilerFailed)
 
 
 def own_copy(fn: Callable) -> Callable:
@@ -54,15 +66,17 @@ def _calling(func: Callable, bound_args: tuple, bound_keywords: dict) -> Callabl
     return own_copy(call)
 
 
-def compile_for_world(fn: Callable, mode: Optional[str], arguments_only: bool = False) -> Callable:
+def compile_for_world(fn: Callable, mode: Optional[str], arguments_only: bool = False,
+                      background: Optional[BackgroundCompiler] = None) -> Callable:
     """A compiled private copy of ``fn`` (fixed shapes: a new batch size compiles again).
 
     ``arguments_only``: check only what is passed in on each call (see :func:`_direct_arguments`), for
     pure functions whose other inputs (a partial's constants, a bound method's attributes) never change.
+    ``background``: compile there, running ``fn`` eagerly until it is done (arguments_only only).
     """
     if not arguments_only:
         return torch.compile(own_copy(fn), dynamic=False, mode=mode)
-    return _OneGraph(fn, mode, _direct_arguments)
+    return _OneGraph(fn, mode, _direct_arguments, background)
 
 
 #: guards that cover process-wide state (grad mode, default device, ...): cheap, and never implied by a layout
@@ -102,15 +116,41 @@ class _OneGraph:
     cutting those would let code compiled for one world run on another's
     shapes. A function that breaks falls back to ``torch.compile`` with all of
     its guards (correct, slower; the compiled-path tests require one graph).
+
+    With a ``background`` compiler, the first call hands a copy of its inputs
+    to it and every call runs ``fn`` eagerly until that compile is done
+    (:mod:`vmas_ros.simulator.background_compile`).
     """
 
-    def __init__(self, fn: Callable, mode: Optional[str], guard_filter: Callable) -> None:
+    def __init__(self, fn: Callable, mode: Optional[str], guard_filter: Callable,
+                 background: Optional[BackgroundCompiler] = None) -> None:
         self._fn, self._mode = fn, mode
         self._compiled = torch.compile(own_copy(fn), dynamic=False, mode=mode, fullgraph=True,
                                        options={"guard_filter_fn": guard_filter})
         self.one_graph: Optional[bool] = None  # known after the first call
+        self._background = background
+        self._eager_until_compiled = background is not None
+        self._submitted = False
 
     def __call__(self, *args, **kwargs):
+        if self._eager_until_compiled:
+            if self._submitted:
+                return self._fn(*args, **kwargs)
+            # the inputs are copied before the eager call (which may write into them), and handed over after
+            # it: an eager call fills what the function caches lazily, which a trace must find filled
+            inputs = copy_inputs((args, kwargs))
+            result = self._fn(*args, **kwargs)
+            self._submitted = True
+            self._background.submit(self._compiled_call, *inputs, self._background_done)
+            return result
+        return self._compiled_call(*args, **kwargs)
+
+    def _background_done(self, ok: bool) -> None:
+        # (on the compile thread) from the next call on, run compiled; a failed compile stays eager
+        if ok:
+            self._eager_until_compiled = False
+
+    def _compiled_call(self, *args, **kwargs):
         if self.one_graph is False:
             return self._compiled(*args, **kwargs)
         try:
@@ -141,8 +181,9 @@ class LayoutCompiled:
     part of the layout. Only the copies of the current tables are kept.
     """
 
-    def __init__(self, fn: Callable, mode: Optional[str], key: Callable[..., Hashable], checked: Sequence[str]) -> None:
-        self._fn, self._mode, self._key = fn, mode, key
+    def __init__(self, fn: Callable, mode: Optional[str], key: Callable[..., Hashable], checked: Sequence[str],
+                 background: Optional[BackgroundCompiler] = None) -> None:
+        self._fn, self._mode, self._key, self._background = fn, mode, key, background
         self._filter = _guards_on(checked)
         self._owner: object = None  # what the cached copies were compiled for (the world's tables)
         self._copies: Dict[Hashable, Callable] = {}
@@ -153,7 +194,7 @@ class LayoutCompiled:
         key = self._key(*args)
         compiled = self._copies.get(key)
         if compiled is None:
-            compiled = self._copies[key] = _OneGraph(self._fn, self._mode, self._filter)
+            compiled = self._copies[key] = _OneGraph(self._fn, self._mode, self._filter, self._background)
         return compiled(*args)
 
 
@@ -177,9 +218,16 @@ class WorldKernel:
         if not world.physics_compiled:
             return self._fn(*args, **kwargs)
         if self._compiled is None or self._mode != world.compile_mode:
-            self._compiled = compile_for_world(self._fn, world.compile_mode, arguments_only=True)
+            self._compiled = compile_for_world(self._fn, world.compile_mode, arguments_only=True,
+                                               background=world.background_compiler)
             self._mode = world.compile_mode
-        return self._compiled(*args, **kwargs)
+        try:
+            return self._compiled(*args, **kwargs)
+        except Exception as error:
+            if not compile_failed(error):
+                raise
+            world.fall_back_to_eager(error)
+            return self._fn(*args, **kwargs)
 
 
 class StateFunction:

@@ -15,8 +15,18 @@ __all__ = [
     "SCATTER_TRANSPOSE_BELOW", "GEMM_SCATTER_MAX_CELLS", "GEMM_SCATTER_MIN_PAIRS", "SMALL_BATCH_ELEMENTS",
     "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
     "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
-    "GRID_MIN_SPHERES", "GRID_START_CAPACITY", "GRID_MIN_LIDARS",
+    "GRID_MIN_SPHERES", "GRID_START_CAPACITY", "GRID_MIN_LIDARS", "DEFAULT_COMPILE_MAX_ENVS",
 ]
+
+# --- the default mode -------------------------------------------------------------------------
+
+#: Up to this many envs, the default mode (``make_env`` without ``compile_physics``) compiles the step
+#: where a compiler is present; from here on it steps eagerly. At such batches each kernel is bound by
+#: memory traffic, so compiling gains little on simple worlds, while the compiler itself stays resident
+#: (torch._dynamo and inductor), which falls on exactly the users who raise
+#: ``num_envs`` to fill their memory. ``compile_physics=True`` still compiles at any size
+#: (docs/bench/default_mode.md has both sides).
+DEFAULT_COMPILE_MAX_ENVS = 20_000
 
 # --- physics step ---------------------------------------------------------------------------
 

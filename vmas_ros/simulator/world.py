@@ -23,12 +23,12 @@ from torch import Tensor
 
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator import physics, rays
-from vmas_ros.simulator.compiling import LayoutCompiled, compile_for_world
+from vmas_ros.simulator.background_compile import BackgroundCompiler
+from vmas_ros.simulator.compiled_world import CompiledWorld
 from vmas_ros.simulator.entities import Agent, Entity, Landmark
 from vmas_ros.simulator.action_block import ActionBlock
 from vmas_ros.simulator.physics.actions import agents_action_input
 from vmas_ros.simulator.physics.joints import fixed_rotations
-from vmas_ros.simulator.physics.pipeline import advance
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.tables import PAIR_KINDS, WorldTables, build_tables
 from vmas_ros.simulator.utils import (
@@ -40,15 +40,6 @@ __all__ = ["World"]
 
 #: shape-kind pairs a collision kernel exists for, each sorted by name
 _COLLIDABLE_KINDS = frozenset(tuple(sorted(kinds)) for kinds in PAIR_KINDS)
-
-
-def _step_layout(state, tables, params: physics.StepParams, actions, fixed_rotation, kernels) -> tuple:
-    """What a compiled step bakes in besides its tables (see ``LayoutCompiled``): the step parameters, the
-    form of the action input, whether joints have target angles, and which state kernels ride along."""
-    return (params.dt, params.substeps, params.collision_force, params.joint_force, params.torque_constraint_force,
-            params.contact_margin, params.x_semidim, params.y_semidim, params.broad_phase,
-            isinstance(actions, tuple), fixed_rotation is None, tuple(id(kernel) for kernel in kernels),
-            tuple(group.capacity for group in tables.sphere_groups))
 
 
 def _no_entity(_: Entity) -> bool:
@@ -112,11 +103,8 @@ class World:
         self.entity_index_map: Dict[Entity, int] = {}
         self._broad_phase = self.default_broad_phase
         self._sphere_grid = "auto"
-        #: the step as one function: advance, or a torch.compile'd copy of it (compile_physics)
-        self._physics_step = advance
-        self._compile_mode: Optional[str] = None
-        #: shape kind -> ray kernel used by cast_rays (compiled copies after compile_physics)
-        self._ray_kernels = rays.EAGER_KERNELS
+        #: the step and the ray kernels: eager, or compiled (compile_physics)
+        self._compiled = CompiledWorld()
         #: what ray_targets knows of layout-static lidar filters (see rays.ray_targets)
         self._static_ray_targets: rays.TargetCache = {}
 
@@ -147,7 +135,7 @@ class World:
         self._sphere_grid = value
         self._invalidate_tables()
 
-    def compile_physics(self, enabled: bool = True, mode: Optional[str] = None) -> None:
+    def compile_physics(self, enabled: bool = True, mode: Optional[str] = None, background: bool = False) -> None:
         """Run the physics step through ``torch.compile`` (off by default).
 
         The step is a fixed sequence of batched kernels with no host reads, so
@@ -159,27 +147,27 @@ class World:
         Results equal the eager step to float rounding, not bit for bit: the
         compiler may reorder and fuse float ops, so parity with VMAS is only
         bit-exact on the eager path.
+
+        ``background=True`` compiles each function on a thread of its own
+        (:mod:`~vmas_ros.simulator.background_compile`): the world steps
+        eagerly, never waiting, and each function runs compiled from the call
+        after its compile is done (what sim_node does by default).
         """
-        self._compile_mode = mode
-        if not enabled:
-            self._physics_step = advance
-            self._ray_kernels = rays.EAGER_KERNELS
-            return
-        # one compiled copy per layout, checking only the state and the actions on each call (LayoutCompiled)
-        self._physics_step = LayoutCompiled(advance, mode, key=_step_layout,
-                                            checked=("state.", "actions", "fixed_rotation"))
-        # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
-        self._ray_kernels = {kind: compile_for_world(fn, mode, arguments_only=True)
-                             for kind, fn in rays.EAGER_KERNELS.items()}
+        self._compiled.compile(enabled, mode, background)
 
     @property
     def physics_compiled(self) -> bool:
-        return self._physics_step is not advance
+        return self._compiled.compiled
+
+    @property
+    def background_compiler(self) -> Optional[BackgroundCompiler]:
+        """What compiles this world's functions off its thread (``compile_physics(background=True)``), or None."""
+        return self._compiled.background
 
     @property
     def compile_mode(self) -> Optional[str]:
         """The ``mode`` given to :meth:`compile_physics` (scenario kernels compile with it too)."""
-        return self._compile_mode
+        return self._compiled.mode
 
     # ------------------------------------------------------------------ registry
     def add_agent(self, agent: Agent) -> None:
@@ -341,9 +329,11 @@ class World:
                     agent.state._c = agent.action.c
 
     def _advance(self, state, tables, params, actions, fixed_rotation, kernels):
-        if self._physics_step is advance:
-            return advance(state, tables, params, actions, fixed_rotation, kernels)
-        return self._physics_step(tables, state, tables, params, actions, fixed_rotation, kernels)  # keyed on tables
+        return self._compiled.advance(state, tables, params, actions, fixed_rotation, kernels)
+
+    def fall_back_to_eager(self, error: BaseException) -> None:
+        """Compiling failed (``error``): log it once per process and step eagerly from now on."""
+        self._compiled.fall_back(error)
 
     def _action_input(self, tables: WorldTables, q: Tensor):
         """The step's action input (:func:`~vmas_ros.simulator.physics.actions.agents_action_input`)."""
@@ -408,7 +398,8 @@ class World:
         """:meth:`cast_rays` for rays given by their direction ``(cos, sin)``, each ``[B, R]``, for sensors
         that know their directions more cheaply (see ``Lidar.ray_directions``)."""
         targets = self.ray_targets(entity, entity_filter)
-        return rays.cast_rays_along(entity.state.pos, targets, cos_a, sin_a, max_range, self._ray_kernels)
+        return self._compiled.cast(
+            lambda kernels: rays.cast_rays_along(entity.state.pos, targets, cos_a, sin_a, max_range, kernels))
 
     def ray_targets(self, entity: Entity, entity_filter: Callable[[Entity], bool]) -> List[Entity]:
         """The entities rays from ``entity`` can hit (``entity_filter`` true, not itself); all must collide

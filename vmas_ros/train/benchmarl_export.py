@@ -196,7 +196,8 @@ def export_benchmarl_run(run_dir: Union[str, Path], out_stem: Union[str, Path]) 
         experiment = _reload(checkpoint, Path(workdir))
         parts = _actor_parts(experiment)
         scenario, scenario_kwargs, env_level = _task_scenario(experiment)
-        env = vmas_ros.make_env(scenario, num_envs=1, continuous_actions=True, **env_level, **scenario_kwargs)
+        env = vmas_ros.make_env(scenario, num_envs=1, continuous_actions=True, compile_physics=False, **env_level,
+                                **scenario_kwargs)  # only its spaces are read: nothing to compile for
         env_info = describe_env(env)
         if env_info["agents"] != parts["agents"]:
             raise ValueError(f"BenchMARL's group agents {parts['agents']} differ from the scenario's agents "

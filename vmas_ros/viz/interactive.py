@@ -278,6 +278,7 @@ def render_interactively(
     pygame = _import_pygame()
     kwargs.setdefault("seed", 0)
     kwargs.setdefault("device", "cpu")
+    kwargs.setdefault("compile_physics", False)  # one env at frame rate: compiling would only delay the window
     env = vmas_ros.make_env(scenario, num_envs=1, continuous_actions=True, **kwargs)
     player = InteractivePlayer(env, control_two_agents=control_two_agents)
     key_names = _key_names(pygame)

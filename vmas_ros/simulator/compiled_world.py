@@ -1,0 +1,84 @@
+"""How one world's step and LIDAR ray kernels run: eagerly, compiled, or compiled in the background.
+
+``World.compile_physics`` sets it; ``World.step`` and ``World.cast_rays``
+call through it. One place also owns what happens when compiling turns out
+not to work after all (no usable C++ compiler): the world logs it once and
+goes on eagerly, redoing the call that failed, so no step is lost.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+from vmas_ros.simulator import physics, rays
+from vmas_ros.simulator.background_compile import BackgroundCompiler
+from vmas_ros.simulator.compile_default import note_fallback
+from vmas_ros.simulator.compiling import LayoutCompiled, compile_failed, compile_for_world
+from vmas_ros.simulator.physics.pipeline import advance
+
+__all__ = ["CompiledWorld"]
+
+
+def _step_layout(state, tables, params: physics.StepParams, actions, fixed_rotation, kernels) -> tuple:
+    """What a compiled step bakes in besides its tables (see ``LayoutCompiled``): the step parameters, the
+    form of the action input, whether joints have target angles, and which state kernels ride along."""
+    return (params.dt, params.substeps, params.collision_force, params.joint_force, params.torque_constraint_force,
+            params.contact_margin, params.x_semidim, params.y_semidim, params.broad_phase,
+            isinstance(actions, tuple), fixed_rotation is None, tuple(id(kernel) for kernel in kernels),
+            tuple(group.capacity for group in tables.sphere_groups))
+
+
+class CompiledWorld:
+    """A world's step function and ray kernels, eager until :meth:`compile` says otherwise."""
+
+    def __init__(self) -> None:
+        #: the step as one function: advance, or a torch.compile'd copy of it
+        self.step: Callable = advance
+        #: shape kind -> ray kernel used by cast_rays (compiled copies when compiled)
+        self.ray_kernels = rays.EAGER_KERNELS
+        self.mode: Optional[str] = None
+        self.background: Optional[BackgroundCompiler] = None
+
+    @property
+    def compiled(self) -> bool:
+        return self.step is not advance
+
+    def compile(self, enabled: bool, mode: Optional[str], background: bool) -> None:
+        """Compile (``enabled``) with torch.compile ``mode``, on a thread of its own with ``background``."""
+        self.mode, self.background = mode, None
+        if not enabled:
+            self.step, self.ray_kernels = advance, rays.EAGER_KERNELS
+            return
+        self.background = BackgroundCompiler() if background else None
+        # one compiled copy per layout, checking only the state and the actions on each call (LayoutCompiled)
+        self.step = LayoutCompiled(advance, mode, key=_step_layout, checked=("state.", "actions", "fixed_rotation"),
+                                   background=self.background)
+        # the LIDAR's ray kernels too: each is a long chain of elementwise ops over [targets, envs, rays]
+        self.ray_kernels = {kind: compile_for_world(fn, mode, arguments_only=True, background=self.background)
+                            for kind, fn in rays.EAGER_KERNELS.items()}
+
+    def advance(self, state, tables, params, actions, fixed_rotation, kernels):
+        """``(new state, kernel outputs)`` of one step (``pipeline.advance``), compiled where it is."""
+        if self.step is advance:
+            return advance(state, tables, params, actions, fixed_rotation, kernels)
+        try:
+            return self.step(tables, state, tables, params, actions, fixed_rotation, kernels)  # keyed on tables
+        except Exception as error:
+            if not compile_failed(error):
+                raise
+            self.fall_back(error)  # no working compiler after all: the step goes on eagerly
+            return advance(state, tables, params, actions, fixed_rotation, kernels)
+
+    def cast(self, cast: Callable[[dict], object]):
+        """``cast(ray_kernels)``, again with the eager kernels if compiling them fails."""
+        try:
+            return cast(self.ray_kernels)
+        except Exception as error:
+            if not compile_failed(error):
+                raise
+            self.fall_back(error)
+            return cast(self.ray_kernels)
+
+    def fall_back(self, error: BaseException) -> None:
+        """Compiling failed (``error``): log it once per process and run eagerly from now on."""
+        note_fallback(error)
+        self.compile(False, None, False)
