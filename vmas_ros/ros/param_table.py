@@ -79,13 +79,17 @@ class Param:
             return f"{self.name} must be a finite number, got {value!r}"
         if kind == "bool" and not isinstance(value, bool):
             return f"{self.name} must be true or false, got {value!r}"
-        if kind == "str" and not isinstance(value, str):
+        if kind == "str" and not isinstance(value, str) and not self._bool_word(value):
             return f"{self.name} must be a string, got {value!r}"
-        if self.choices and value not in self.choices:
+        if self.choices and value not in self.choices and not self._bool_word(value):
             return f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}"
         if kind in ("int", "float") and not (self.zero_is_off and value == 0) and not self._in_range(value):
             return f"{self.name} must be {self.bounds()}, got {value}"
         return self.check(value, current) if self.check is not None else None
+
+    def _bool_word(self, value) -> bool:
+        """A bool given for a choice of words that has it (``compile_physics:=true`` arrives as a bool)."""
+        return isinstance(value, bool) and str(value).lower() in self.choices
 
     def _in_range(self, value) -> bool:
         low_ok = self.minimum is None or (value > self.minimum if self.strict else value >= self.minimum)

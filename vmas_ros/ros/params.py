@@ -12,6 +12,7 @@ from typing import Any, Dict, List, Optional
 
 import yaml
 
+from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_MAX_ENVS
 from vmas_ros.ros.param_table import Param, ParamTable
 
 CONTROL_MODES = ("zero", "heuristic", "policy")
@@ -143,7 +144,10 @@ SIM_PARAMS = ParamTable("sim_node", [
     Param("num_envs", 1, "environments stepped in parallel", minimum=1, maximum=MAX_NUM_ENVS),
     Param("env_index", 0, "the env that is published and commanded", runtime=True, check=_env_index),
     Param("device", "cpu", "torch device: cpu, cuda, cuda:N or auto", check=_device),
-    Param("compile_physics", False, "step the physics through torch.compile (compiles for seconds at start)"),
+    Param("compile_physics", "auto", "torch.compile the step: auto compiles in the background while stepping "
+          f"eagerly (where a C++ compiler works, up to {DEFAULT_COMPILE_MAX_ENVS:,} envs); true compiles on the first "
+          "step; false: eager",
+          choices=("auto", "true", "false")),
     Param("seed", 0, "environment seed", minimum=0, maximum=MAX_SEED),
     Param("rate_hz", 0.0, "steps per wall-clock second; 0: paced by real_time_factor", runtime=True,
           minimum=MIN_RATE, maximum=MAX_RATE, zero_is_off=True),
@@ -208,6 +212,10 @@ class _SimValues:
         if self.per_agent_topics == "auto":
             return n_agents <= PER_AGENT_TOPICS_MAX_AGENTS
         return self.per_agent_topics == "on"
+
+    def compile_mode(self) -> str:
+        """``compile_physics`` as ``auto``, ``true`` or ``false`` (a bool from ``compile_physics:=true`` too)."""
+        return str(self.compile_physics).lower()
 
     def cmd_vel_names(self) -> List[str]:
         """``cmd_vel_agents`` as a list of names."""

@@ -45,6 +45,7 @@ from vmas_ros.ros.publish import StatePublisher, StateMessages, StepPhases
 from vmas_ros.ros.stepping import StepLoop
 from vmas_ros.ros.topic_audit import QosAudit, TopicAudit, quiet_subscription_events
 from vmas_ros.scenarios import make_heuristic
+from vmas_ros.simulator.compile_default import compile_by_default
 from vmas_ros.simulator.heuristic_policy import heuristic_actions
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
 from vmas_ros.simulator.threads import limit_threads_for_small_batches
@@ -124,7 +125,8 @@ class SimNode(StepLoop, Node):
         limit_threads_for_small_batches(p.num_envs)
         try:
             device = resolve_device(p.device)
-            self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed, **p.kwargs())
+            self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed,
+                                         compile_physics=False, **p.kwargs())  # compile_physics: see below
         except (ValueError, TypeError, MemoryError) as error:  # bad kwargs, or a world too large
             raise ConfigError(f"cannot build scenario {p.scenario!r}: {error}") from None
         world = self.env.world
@@ -137,13 +139,35 @@ class SimNode(StepLoop, Node):
                     ))
         self.policy = make_heuristic(p.scenario, **p.kwargs())
         self.obs = self.env.reset()
-        if p.compile_physics:
-            # the step and its LIDAR casts through torch.compile; compiled on the first step (seconds)
-            world.compile_physics()
-            self.get_logger().info("compile_physics: the first step compiles the step (a few seconds on a CPU)")
+        self._compile_physics(world, device)
         self.lidars = convert.agent_lidars(world)
         # how the published env is taken after each step is the engine's choice, made here once
         self.snapshot = convert.PublishedEnv(world, self.lidars)
+
+    def _compile_physics(self, world, device) -> None:
+        """The step and its LIDAR casts through torch.compile, as ``compile_physics`` says: ``auto`` (where the
+        default mode compiles) on a thread of its own while the node steps eagerly, never pausing; ``true``
+        on the first step (a pause of seconds, but every step compiled, as make_env does)."""
+        mode = self.params.compile_mode()
+        if mode == "true":
+            world.compile_physics()
+            self.get_logger().info("compile_physics: true: the first step compiles the step (seconds)")
+        elif mode == "auto" and compile_by_default(device, self.params.num_envs):
+            world.compile_physics(background=True)
+            self.get_logger().info("compile_physics: auto: compiling the step in the background; "
+                                   "stepping eagerly until it is ready")
+        self._compile_reported = world.background_compiler is None
+
+    def _report_compiled(self) -> None:
+        """One log line when the background compile is done (called after each step until then)."""
+        compiler = self.env.world.background_compiler
+        if compiler.started and compiler.idle:
+            self._compile_reported = True
+            if compiler.failed:
+                self.get_logger().warning(f"compile_physics: {compiler.failed} of {compiler.compiled + compiler.failed} "
+                                          f"compiles failed; those parts stay eager")
+            self.get_logger().info(f"compile_physics: compiled step in use from step {self.steps + 1} "
+                                   f"(compiled in {compiler.first_ready_s:.1f} s)")
 
     def _build_io(self) -> None:
         world = self.env.world

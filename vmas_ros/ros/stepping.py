@@ -93,6 +93,8 @@ class StepLoop:
             stage = "engine"
             self.obs, self.rewards, _, _ = self.env.step(self._engine_actions(actions))
             self.steps += 1
+            if not self._compile_reported:
+                self._report_compiled()
             if phases is not None:
                 phases.add("engine", start)
             stage = "publish"
