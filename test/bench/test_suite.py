@@ -156,9 +156,12 @@ def test_unavailable_scenario_is_reported_as_skipped(run):
 def test_markdown_table_has_the_columns_and_targets(run):
     _, out, _ = run
     text = (out / "suite.md").read_text()
-    assert "| workload | envs | agents | vmas_ros ms/step | VMAS ms/step | ratio | target | met? |" in text
+    # the default mode (the tests' VMAS_ROS_COMPILE=0 keeps it eager): a column says how each point ran
+    assert ("| workload | envs | agents | default mode | vmas_ros ms/step | VMAS ms/step | ratio | first run s "
+            "| target | met? |" in text)
+    assert text.startswith("# Benchmark suite: vmas_ros vs VMAS 1.5.2\n\nModes measured: default. ")
     (line,) = [line for line in text.splitlines() if line.startswith("| memory_30k")]
-    assert "<= 1x" in line and " MB" in line
+    assert "<= 1x" in line and " MB" in line and "| eager |" in line
     assert "### scaling_envs" in text and "### scaling_agents\n" in text and "### scaling_agents_sparse\n" in text
     assert "side 0.1·√N" in text and "side 0.5·√N, about 3% covered" in text
 
@@ -236,7 +239,8 @@ def test_missing_peer_and_failing_workload_do_not_stop_the_suite(monkeypatch, ca
     (["--peers", "vmas", "gazebo"], "unknown peer(s) ['gazebo']; valid peers: ['vmas', 'mpe']"),
     (["--devices", "cuda"], "cpu only (its targets are CPU targets); got devices ['cuda']; valid: cpu"),
     (["--num-envs", "7"], "--num-envs 7 is for 'bench mpe'"),
-    (["--modes", "eager", "compild"], "unknown mode(s) ['compild']; valid modes: eager, compiled"),
+    (["--modes", "eager", "compild"], "unknown mode(s) ['compild']; valid modes: default, eager, compiled"),
+    (["--modes", "default", "eager"], "--modes default measures vmas_ros as make_env builds it without flags"),
     (["--compile-physics", "--modes", "eager", "compiled"],
      "--compile-physics means --modes compiled, but --modes eager compiled was given too"),
     (["--compile-physics", "--modes", "eager"], "but --modes eager was given too"),
@@ -352,10 +356,11 @@ def test_compiled_only_is_the_vmas_ros_side_flagged_compiled():
 
 
 def test_modes_plan_the_sides_and_compile_physics_is_an_alias():
-    assert suite.resolve_modes(None) == ("eager",) and suite.resolve_modes(None, compile_physics=True) == ("compiled",)
+    assert suite.resolve_modes(None) == ("default",)
+    assert suite.resolve_modes(None, compile_physics=True) == ("compiled",)
     assert suite.resolve_modes(["compiled", "eager", "compiled"]) == ("eager", "compiled")
     assert suite.resolve_modes(["compiled"], compile_physics=True) == ("compiled",)
-    with pytest.raises(ValueError, match=r"unknown mode\(s\) \['jit'\]; valid modes: eager, compiled"):
+    with pytest.raises(ValueError, match=r"unknown mode\(s\) \['jit'\]; valid modes: default, eager, compiled"):
         suite.run_suite(["spread_1"], modes=["jit"], progress=False)
     with pytest.raises(ValueError, match="--compile-physics means --modes compiled"):
         suite.run_suite(["spread_1"], modes=["eager"], compile_physics=True, progress=False)
@@ -369,6 +374,29 @@ def test_modes_plan_the_sides_and_compile_physics_is_an_alias():
     assert units["memory_30k"].sides[0] == "vmas_ros" and units["memory_30k"].compiled_sides == ()
     (only,) = suite.plan_suite(["spread_1"], peers=[], modes=("compiled",))
     assert (only.sides, only.compiled_sides) == (["vmas_ros"], ("vmas_ros",))
+
+
+@pytest.mark.parametrize("setting", ["auto", "0", "1"])
+def test_the_default_mode_plans_what_make_env_would_build(monkeypatch, setting):
+    """One vmas_ros side per point, compiled exactly where make_env without flags compiles: env and
+    mpe workloads up to DEFAULT_COMPILE_MAX_ENVS envs where a compiler works (every size with
+    VMAS_ROS_COMPILE=1, nowhere with 0); never the sphere worlds (World compiles only when asked)."""
+    from vmas_ros.simulator.compile_default import compiler_missing
+
+    monkeypatch.setenv("VMAS_ROS_COMPILE", setting)
+    units = {(u.workload.name, u.num_envs): u for u in suite.plan_suite(
+        ["spread_1", "spread_30k", "transport_10k", "spheres_100", "memory_30k", "mpe_1k", "scaling_envs"],
+        peers=["vmas", "mpe"], modes=("default",))}
+    compiled = {key for key, u in units.items() if u.compiled_sides == ("vmas_ros",)}
+    assert all(u.default_mode and u.sides[0] == "vmas_ros" and "vmas_ros_compiled" not in u.sides
+               for u in units.values())
+    expected = {("spread_1", 1), ("transport_10k", 10_000), ("mpe_1k", 1_000),
+                *(("scaling_envs", n) for n in (1, 10, 100, 1000, 10000))}
+    if setting == "1":
+        expected |= {("spread_30k", 30_000), ("scaling_envs", 30_000)}
+    if setting == "0" or (setting == "auto" and compiler_missing("cpu")):
+        expected = set()
+    assert compiled == expected
 
 
 def test_a_failing_compiled_side_does_not_lose_the_others(monkeypatch, capsys):

@@ -10,6 +10,7 @@ import sys
 
 from vmas_ros.bench.common import BENCHMARKS
 from vmas_ros.bench.report import plot_available
+from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_MAX_ENVS
 
 __all__ = ["add_bench_arguments", "parse_bench_args", "run_bench_command"]
 
@@ -60,9 +61,10 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
                             "navigation swarms); above, omitted (default 100)")
     # no argparse choices: a bad mode exits 2 with the suite's own message, like its other options
     suite.add_argument("--modes", nargs="+", default=None, metavar="MODE",
-                       help="suite: how vmas_ros is stepped: eager, compiled (physics through torch.compile, "
-                            "compiled during the warm-up runs, needs a C++ compiler) or both, timed side by side "
-                            "(default: eager; memory_30k is always eager)")
+                       help="suite: how vmas_ros is stepped: default (as make_env builds it without flags: "
+                            f"compiled where a C++ compiler works, up to {DEFAULT_COMPILE_MAX_ENVS:,} envs), eager, compiled (physics "
+                            "through torch.compile, compiled during the warm-up runs) or eager and compiled, "
+                            "timed side by side (default: default; memory_30k is eager outside the default mode)")
     suite.add_argument("--compile-physics", action="store_true",
                        help="suite: the same as --modes compiled (kept for older commands)")
     from vmas_ros.bench.node import add_node_bench_arguments

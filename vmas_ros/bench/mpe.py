@@ -144,7 +144,7 @@ def _vmas_case(side: str, num_envs: int, device: str, steps: int, compile_physic
         import vmas_ros
 
         make = vmas_ros.make_env
-        extra = {"compile_physics": True} if compile_physics else {}
+        extra = {"compile_physics": bool(compile_physics)}
     else:
         import vmas
 

@@ -37,7 +37,8 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 NODE_COLUMNS = [
-    "run_id", "scenario", "scenario_kwargs", "lidar_rays", "num_envs", "compiled", "unpaced_batch_ms", "window",
+    "run_id", "scenario", "scenario_kwargs", "lidar_rays", "num_envs", "compiled", "compile_physics", "compile_s",
+    "unpaced_batch_ms", "window",
     "duration_s", "steps",
     "steps_per_s", "wall_us", "actions_us", "engine_us", "lidar_us", "convert_us", "publish_us", "executor_us",
     "profiled_steps_per_s", "cpu_us", "threads", "loadavg_1m",
@@ -68,6 +69,9 @@ def add_node_bench_arguments(parser: argparse.ArgumentParser) -> argparse.Argume
     node.add_argument("--unpaced-batch-ms", type=float, default=None,
                       help="node: the node's unpaced_batch_ms, wall ms of steps per executor round (default: the "
                            "node's, 4)")
+    node.add_argument("--node-compile", choices=("auto", "true", "false"), default=None,
+                      help="node: the node's compile_physics (default: the node's, auto: compiled in the background, "
+                           "timed once it is in use); --compile-physics means true")
     node.add_argument("--raw-subscriber", action="store_true",
                       help="node: the subscriber takes the serialised bytes without deserialising them")
     return parser
@@ -146,12 +150,14 @@ def _topics(node, kinds) -> Dict[str, str]:
 # ------------------------------------------------------------------- the run
 def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '{"n_agents": 4}', lidar_rays: int = 12, num_envs: int = 1,
                        duration: float = 3.0, repeats: int = 3, warmup: int = 1, subscribe: str = "core",
-                       raw_subscriber: bool = False, progress: bool = True, compile_physics: bool = False,
-                       unpaced_batch_ms: Optional[float] = None) -> dict:
+                       raw_subscriber: bool = False, progress: bool = True, compile_physics: str = "auto",
+                       unpaced_batch_ms: Optional[float] = None, compile_timeout: float = 600.0) -> dict:
     """Measure the node; returns ``{"rows": [...per window...], "summary": {...}}``.
 
-    ``compile_physics``: the node's ``compile_physics`` parameter; the first step compiles, inside the
-    warm-up window (so ``warmup`` must be at least 1).
+    ``compile_physics``: the node's ``compile_physics`` parameter. ``true``: the first step compiles,
+    inside the warm-up window (so ``warmup`` must be at least 1); ``auto`` (the node's default): the
+    node compiles in the background, and the warm-up lasts until the compiled step is in use (at most
+    ``compile_timeout`` seconds), so that the timed windows measure what a node runs from then on.
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -163,7 +169,9 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
 
     if duration <= 0 or repeats < 1 or warmup < 0 or lidar_rays < 0 or num_envs < 1:
         raise ValueError("duration must be > 0, repeats >= 1, warmup >= 0, lidar_rays >= 0, num_envs >= 1")
-    if compile_physics and warmup < 1:
+    if compile_physics not in ("auto", "true", "false"):
+        raise ValueError(f"compile_physics must be auto, true or false, got {compile_physics!r}")
+    if compile_physics == "true" and warmup < 1:
         raise ValueError(f"--compile-physics needs --warmup >= 1 (the first step compiles), got {warmup}")
     run_id = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
@@ -197,6 +205,8 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
         with tqdm(total=total, disable=not progress, desc="bench node", unit="window", file=sys.stderr,
                   dynamic_ncols=True) as bar:
             for window in range(total):
+                if window == warmup:
+                    _wait_compiled(node, executor, compile_timeout)
                 # steps/s as users run the node (no timers in the step), then the same time with StepPhases
                 steps, wall, cpu = _spin_window(node, executor, duration)
                 node.phases = phases = StepPhases()
@@ -204,7 +214,10 @@ def run_node_benchmark(scenario: str = "simple_spread", scenario_kwargs: str = '
                 node.phases = None
                 row = _row(run_id, scenario, scenario_kwargs, lidar_rays, num_envs, window - warmup, duration, steps, wall,
                            cpu, phases, profiled)
-                row["compiled"] = compile_physics
+                row["compiled"] = node.env.world.physics_compiled
+                row["compile_physics"] = compile_physics
+                compiler = node.env.world.background_compiler
+                row["compile_s"] = None if compiler is None else compiler.first_ready_s
                 row["unpaced_batch_ms"] = node.params.unpaced_batch_ms
                 bar.set_postfix_str(f"{row['steps_per_s']:.0f} steps/s" + (" (warm-up)" if window < warmup else ""))
                 bar.update(1)
@@ -230,6 +243,17 @@ def _spin_window(node, executor, duration: float) -> tuple:
     while time.perf_counter() < end:
         executor.spin_once(timeout_sec=0.1)
     return node.steps - steps0, time.perf_counter() - start, time.thread_time() - cpu0
+
+
+def _wait_compiled(node, executor, timeout: float) -> None:
+    """Spin the node (untimed) until its background compile, if any, is done: the timed windows
+    measure the compiled step in use, not the eager steps before it."""
+    compiler = node.env.world.background_compiler
+    end = time.perf_counter() + timeout
+    while compiler is not None and not (compiler.started and compiler.idle):
+        if time.perf_counter() > end:
+            raise RuntimeError(f"the node's background compile took more than {timeout:.0f} s")
+        executor.spin_once(timeout_sec=0.05)
 
 
 def _wait_matched(node, executor, topics: Dict[str, str], timeout: float = 20.0) -> None:
@@ -306,14 +330,29 @@ def write_node_results(result: dict, out_dir) -> Dict[str, Path]:
     return paths
 
 
+def _compile_option(args: argparse.Namespace) -> str:
+    """The node's compile_physics from ``--node-compile`` and the shared ``--compile-physics`` (= true)."""
+    chosen = getattr(args, "node_compile", None)
+    if getattr(args, "compile_physics", False):
+        if chosen not in (None, "true"):
+            raise ValueError(f"--compile-physics means --node-compile true, but --node-compile {chosen} was given too")
+        return "true"
+    return chosen or "auto"
+
+
 def run_node_bench_command(args: argparse.Namespace) -> int:
     """``vmas-ros bench node``: 0 on success, 2 on bad options."""
+    try:
+        compile_physics = _compile_option(args)
+    except ValueError as error:
+        print(f"vmas-ros bench node: {error}", file=sys.stderr)
+        return 2
     options = dict(scenario=getattr(args, "scenario", "simple_spread"), scenario_kwargs=getattr(args, "scenario_kwargs", '{"n_agents": 4}'),
                    lidar_rays=getattr(args, "lidar_rays", 12), num_envs=getattr(args, "node_num_envs", 1),
                    duration=getattr(args, "duration", 3.0), repeats=getattr(args, "repeats", 3),
                    warmup=getattr(args, "warmup", 1), subscribe=getattr(args, "subscribe", "core"),
                    raw_subscriber=bool(getattr(args, "raw_subscriber", False)),
-                   compile_physics=bool(getattr(args, "compile_physics", False)),
+                   compile_physics=compile_physics,
                    unpaced_batch_ms=getattr(args, "unpaced_batch_ms", None))
     from vmas_ros.bench.timing import pinned_threads
 

@@ -68,13 +68,15 @@ from vmas_ros.bench.suite_report import (
     write_suite_results,
 )
 from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
+from vmas_ros.simulator.compile_default import compile_by_default
 
 __all__ = ["MODES", "WORKLOADS", "Workload", "navigation_swarm", "plan_suite", "resolve_modes", "run_suite",
            "run_suite_command", "validate_suite_options"]
 
 SIDE, PEER_VMAS, PEER_MPE = "vmas_ros", "vmas", "mpe"
-#: how vmas_ros can be stepped (``--modes``): eager, or its physics through torch.compile
-MODES = ("eager", "compiled")
+#: how vmas_ros can be stepped (``--modes``): as make_env does without flags (the default mode: compiled
+#: where it can be, see vmas_ros.simulator.compile_default), eager, or its physics through torch.compile
+MODES = ("default", "eager", "compiled")
 CURVE_AGENTS = (10, 30, 100, 300, 1000)
 #: the swarm curve goes where only a broad phase can: a step whose cost grows like the agents, not their pairs
 CURVE_AGENTS_SPARSE = (100, 300, 1_000, 3_000, 10_000, 30_000, 100_000)
@@ -141,6 +143,7 @@ class Unit:
     sides: List[str]  # sides to measure: vmas_ros, then vmas_ros_compiled, then the peer
     skipped: Dict[str, str]  # side -> why it is not measured
     compiled_sides: Tuple[str, ...] = ()  # the sides built with compile_physics=True
+    default_mode: bool = False  # vmas_ros is built as make_env builds it without flags (compiled_sides says how)
 
 
 # ----------------------------------------------------------------- options
@@ -161,18 +164,22 @@ def _positive_ints(name: str, values, allow_none: bool = True) -> None:
 def resolve_modes(modes: Optional[Sequence[str]] = None, compile_physics: bool = False) -> Tuple[str, ...]:
     """The modes to measure, eager first, duplicates dropped; ValueError naming a bad one.
 
-    ``compile_physics=True`` is the old spelling of ``modes=("compiled",)`` and is kept so
+    None is the default mode alone: vmas_ros as a user gets it without flags. ``default`` is
+    measured alone (it is eager or compiled per point already); ``compile_physics=True`` is the old spelling of ``modes=("compiled",)`` and is kept so
     existing commands and scripts still run; given with modes that say otherwise it is
     an error rather than a silent choice of one of them.
     """
     if modes is None:
-        return ("compiled",) if compile_physics else ("eager",)
+        return ("compiled",) if compile_physics else ("default",)
     if isinstance(modes, str) or not isinstance(modes, Sequence) or not modes:
         raise ValueError(f"modes must be a non-empty list of {', '.join(MODES)}, got {modes!r}")
     bad = [m for m in modes if m not in MODES]
     if bad:
         raise ValueError(f"unknown mode(s) {bad}; valid modes: {', '.join(MODES)}")
     resolved = tuple(m for m in MODES if m in modes)
+    if "default" in resolved and len(resolved) > 1:
+        raise ValueError(f"--modes default measures vmas_ros as make_env builds it without flags and is given alone; "
+                         f"got --modes {' '.join(modes)} (to time both ways side by side: --modes eager compiled)")
     if compile_physics and resolved != ("compiled",):
         raise ValueError(f"--compile-physics means --modes compiled, but --modes {' '.join(modes)} was given too; "
                          f"pass only one of them")
@@ -208,9 +215,10 @@ def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, pe
         unknown = [p for p in ([peers] if isinstance(peers, str) else peers) if p not in _mpe.PEERS]
         if isinstance(peers, str) or unknown:
             raise ValueError(f"unknown peer(s) {unknown or [peers]}; valid peers: {list(_mpe.PEERS)}")
-    if "compiled" in resolved and warmup < 1:  # the first compiled run compiles for seconds: never time it
-        raise ValueError(f"the compiled mode (--modes compiled, --compile-physics) needs --warmup >= 1 (the first "
-                         f"run compiles), got {warmup}")
+    compiles = "compiled" in resolved or (resolved == ("default",) and compile_by_default("cpu", 1))
+    if compiles and warmup < 1:  # the first compiled run compiles for seconds: never time it
+        raise ValueError(f"the {resolved[-1]} mode needs --warmup >= 1 (the first run compiles), got {warmup}; "
+                         f"--modes eager times without one")
     return resolved
 
 
@@ -221,12 +229,18 @@ def _scenario_available(name: str) -> bool:
     return name in REGISTRY
 
 
-def _our_sides(kind: str, modes: Sequence[str]) -> Tuple[List[str], Tuple[str, ...]]:
+def _our_sides(kind: str, modes: Sequence[str], num_envs: int) -> Tuple[List[str], Tuple[str, ...]]:
     """vmas_ros's sides for a workload kind and which of them are compiled.
 
     Both modes: "vmas_ros" (eager) and "vmas_ros_compiled". Compiled alone: the one
-    "vmas_ros" side, compiled (as ``--compile-physics`` always wrote it). memory is eager only.
+    "vmas_ros" side, compiled (as ``--compile-physics`` always wrote it). memory is eager only,
+    except in the default mode, where its subprocess builds the env without flags. Default: the one
+    "vmas_ros" side, compiled where make_env would compile it (the sphere worlds are built with
+    ``World``, which compiles only when asked).
     """
+    if modes == ("default",):
+        compiled = kind in ("env", "envs_curve", "mpe") and compile_by_default("cpu", num_envs)
+        return [SIDE], ((SIDE,) if compiled else ())
     if kind == "memory" or "compiled" not in modes:
         return [SIDE], ()
     if "eager" not in modes:
@@ -261,8 +275,8 @@ def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, pe
             points = [(n, None) for n in sorted({_scaled(n, scale) for n in curve})]
         else:
             points = [(_scaled(w.num_envs, scale), w.n_agents or w.kwargs.get("n_agents"))]
-        ours, compiled = _our_sides(w.kind, modes)
         for num_envs, n_agents in points:
+            ours, compiled = _our_sides(w.kind, modes, num_envs)
             skipped: Dict[str, str] = {}
             if w.scenario is not None and not _scenario_available(w.scenario):
                 skipped = {side: "scenario not available" for side in ours + [w.peer]}
@@ -272,7 +286,7 @@ def plan_suite(workloads: Optional[Sequence[str]] = None, scale: float = 1.0, pe
                 skipped[w.peer] = (f"omitted: above --max-peer-agents {max_peer_agents} "
                                    f"(upstream is O(pairs) with host syncs; not extrapolated)")
             sides = [s for s in ours + [w.peer] if s not in skipped]
-            units.append(Unit(w, num_envs, n_agents, sides, skipped, compiled))
+            units.append(Unit(w, num_envs, n_agents, sides, skipped, compiled, default_mode=modes == ("default",)))
     return units
 
 
@@ -281,7 +295,8 @@ def _time_row(run_id: str, unit: Unit, side: str, steps: int, timing: Timing, me
     """mpe.py's row (medians, extrapolation to num_envs), plus the suite's columns."""
     row = _mpe._row(run_id, side, "cpu", unit.num_envs, steps, timing, measured_envs, unit.num_envs, loadavg)
     row.update(scenario=unit.workload.scenario or "spheres", metric="time", value=row["per_step_ms"],
-               unit="ms/step", rss_mb=None, baseline_rss_mb=None, compiled=side in unit.compiled_sides)
+               unit="ms/step", rss_mb=None, baseline_rss_mb=None, compiled=side in unit.compiled_sides,
+               default_mode=unit.default_mode and side == SIDE, first_run_s=timing.first_run_s)
     return row
 
 
@@ -290,7 +305,7 @@ def _other_row(run_id: str, unit: Unit, side: str, steps: int, threads: int, sta
     return {"run_id": run_id, "scenario": unit.workload.scenario or "spheres", "side": side, "device": "cpu",
             "num_envs": unit.num_envs, "steps": steps, "repeats": 0, "threads": threads, "times_s": [],
             "status": status, "note": note, "metric": "memory" if unit.workload.kind == "memory" else "time",
-            "compiled": side in unit.compiled_sides}
+            "compiled": side in unit.compiled_sides, "default_mode": unit.default_mode and side == SIDE}
 
 
 # ------------------------------------------------------------------ memory
@@ -298,7 +313,7 @@ def _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run) -
     results: Dict[str, List[dict]] = {side: [] for side in unit.sides}
     for index in range(repeats):  # alternate the sides, as time_alternating does
         for side in unit.sides:
-            results[side].append(_memory_run(side, unit, steps, threads, seed))
+            results[side].append(_memory_run(side, unit, steps, threads, seed, default_mode=unit.default_mode))
             on_run(side, index, results[side][-1]["seconds"])
     rows = []
     for side, runs in results.items():

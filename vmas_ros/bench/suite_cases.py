@@ -44,7 +44,7 @@ def library_of(side: str) -> str:
 
 def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int, compiled: bool = False):
     make = importlib.import_module(library_of(side)).make_env
-    extra = {"compile_physics": True} if compiled and library_of(side) == "vmas_ros" else {}
+    extra = {"compile_physics": compiled} if library_of(side) == "vmas_ros" else {}
     return make(scenario, num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed, **dict(kwargs), **extra)
 
 
@@ -126,7 +126,7 @@ def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int,
 # Peak RSS is the kernel's high-water mark (VmHWM). It is reset after the imports
 # (Linux /proc/self/clear_refs "5") so that a transient peak while importing torch
 # cannot hide the env's own use; elsewhere ru_maxrss since process start is used.
-# Always eager: a compiled env's peak would mostly measure the compiler.
+# Eager (VMAS_ROS_COMPILE=0), or in the default mode as make_env builds the env without flags.
 _MEMORY_SCRIPT = r"""
 import gc, json, resource, sys, time
 import torch
@@ -165,8 +165,9 @@ print(json.dumps({"peak_rss_mb": status_mb("VmHWM"), "baseline_rss_mb": baseline
 """
 
 
-def memory_run(side: str, unit: "Unit", steps: int, threads: int, seed: int) -> dict:
-    """Peak RSS (MiB) of a fresh interpreter that imports only torch and ``side``'s library and steps it (eager)."""
+def memory_run(side: str, unit: "Unit", steps: int, threads: int, seed: int, default_mode: bool = False) -> dict:
+    """Peak RSS (MiB) of a fresh interpreter that imports only torch and ``side``'s library and steps it:
+    eager, or with ``default_mode`` as make_env builds it without flags (and without VMAS_ROS_COMPILE)."""
     if side == COMPILED_SIDE:
         raise ValueError("memory_30k is measured eager only; there is no compiled memory run")
     config = {"module": library_of(side), "scenario": unit.workload.scenario, "num_envs": unit.num_envs,
@@ -174,6 +175,9 @@ def memory_run(side: str, unit: "Unit", steps: int, threads: int, seed: int) -> 
     environ = dict(os.environ)
     root = str(Path(importlib.import_module("vmas_ros").__file__).resolve().parent.parent)  # source checkouts too
     environ["PYTHONPATH"] = os.pathsep.join(p for p in (root, environ.get("PYTHONPATH")) if p)
+    environ.pop("VMAS_ROS_COMPILE", None)
+    if not default_mode:
+        environ["VMAS_ROS_COMPILE"] = "0"
     done = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT, json.dumps(config)], capture_output=True,
                           text=True, env=environ, check=False)
     lines = [line for line in done.stdout.splitlines() if line.startswith("{")]

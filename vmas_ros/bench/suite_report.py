@@ -60,7 +60,7 @@ SUITE_COLUMNS = [
     "run_id", "workload", "scenario", "side", "status", "note", "device", "num_envs", "n_agents", "steps",
     "repeats", "metric", "value", "unit", "median_s", "min_s", "max_s", "per_step_ms", "env_steps_per_s",
     "extrapolated", "measured_envs", "threads", "times_s", "rss_mb", "baseline_rss_mb", "peak_rss_mb",
-    "loadavg_1m", "compiled",
+    "loadavg_1m", "compiled", "default_mode", "first_run_s",
 ]
 
 
@@ -114,6 +114,7 @@ def summarize(rows: Sequence[dict], targets: Mapping[str, Tuple[str, float]] = T
         compiled_ratio = _ratio_of(comp, theirs, metric) if comp_ok and theirs_ok else None
         target = None if workload in CURVES else targets.get(workload)
         mode = None if ours is None else "compiled" if ours.get("compiled") else "eager"
+        default_mode = bool(ours and ours.get("default_mode"))
         met_eager = evaluate_target(ratio, target)
         met_compiled = None if metric == "memory" else evaluate_target(compiled_ratio, target)
         met = True if True in (met_eager, met_compiled) else False if False in (met_eager, met_compiled) else None
@@ -133,7 +134,8 @@ def summarize(rows: Sequence[dict], targets: Mapping[str, Tuple[str, float]] = T
             "met_by": mode if met_eager else "compiled" if met_compiled else None,
             "status": _status(ours), "peer_status": _status(theirs),
             "peer_extrapolated": bool(theirs.get("extrapolated")) if theirs_ok else False,
-            "vmas_ros_mode": mode,
+            "vmas_ros_mode": mode, "default_mode": default_mode,
+            "first_run_s": ours.get("first_run_s") if ours_ok else None,
             "compiled": comp["value"] if comp_ok else None,
             "compiled_env_steps_per_s": comp.get("env_steps_per_s") if comp_ok else None,
             "compiled_status": _status(comp),
@@ -190,14 +192,18 @@ def _header(head: List[str], left: Sequence[int]) -> List[str]:
 
 
 def _main_table(entries: List[dict]) -> List[str]:
-    compiled = _has_compiled(entries)
-    head = ["workload", "envs", "agents", "vmas_ros ms/step", "VMAS ms/step", "ratio"]
+    compiled, default = _has_compiled(entries), any(e.get("default_mode") for e in entries)
+    head = ["workload", "envs", "agents"] + (["default mode"] if default else [])
+    head += ["vmas_ros ms/step", "VMAS ms/step", "ratio"] + (["first run s"] if default else [])
     head += ["compiled ms/step", "compiled ratio"] if compiled else []
     lines = _header(head + ["target", "met?"], left=(0, len(head) + 1))
     for e in entries:
         name = e["workload"] + (f" (vs {_LABEL.get(e['peer'], e['peer'])})" if e["peer"] != "vmas" else "")
-        cells = [name, str(e["num_envs"]), "-" if e["n_agents"] is None else str(e["n_agents"]),
-                 _value(e, "vmas_ros"), _value(e, "peer"), _ratio(e)]
+        cells = [name, str(e["num_envs"]), "-" if e["n_agents"] is None else str(e["n_agents"])]
+        cells += [e["vmas_ros_mode"] or "-"] if default else []
+        cells += [_value(e, "vmas_ros"), _value(e, "peer"), _ratio(e)]
+        if default:
+            cells.append("-" if e.get("first_run_s") is None else f"{e['first_run_s']:.1f}")
         cells += [_value(e, "compiled"), _ratio(e, "compiled_ratio")] if compiled else []
         lines.append("| " + " | ".join(cells + [e["target"] or "-", _met(e, compiled)]) + " |")
     return lines
@@ -246,6 +252,12 @@ def format_suite_table(summary: Sequence[dict]) -> str:
                      "which are not timed. compiled ratio: peer median time / compiled median time. met?: the target "
                      "checked on the better of the two ratios: (eager) when the eager ratio meets it (also when both "
                      "do), (compiled only) when only the compiled one does. memory_30k is measured eager only.")
+    elif any(e.get("default_mode") for e in summary):
+        lines.append("default mode: vmas_ros as make_env builds it without flags; the default mode column says "
+                     "whether that compiled the physics (torch.compile, during the untimed warm-up runs) or ran it "
+                     "eagerly (above the size where the default mode compiles, the sphere worlds built with World, "
+                     "or where no compiler works). first run s: the first, untimed run of the same steps on a "
+                     "fresh env, compiling included (the latency a user meets once per env).")
     elif any(e.get("vmas_ros_mode") == "compiled" for e in summary):
         lines.append("vmas_ros ran compiled (--modes compiled: physics through torch.compile, compiled during the "
                      "warm-up runs); memory_30k is measured eager only.")
@@ -364,12 +376,16 @@ def _plot_curves(rows: Sequence[dict], workloads: Sequence[str], path: Path, inf
 def measured_modes(rows: Sequence[dict]) -> List[str]:
     """The modes vmas_ros was run in (eager first), from the rows' ``compiled`` flags; memory
     rows are left out because memory is always eager, whatever the modes."""
+    if any(r.get("default_mode") for r in rows):
+        return ["default"]
     ours = [r for r in rows if r["side"] in OURS and r.get("metric") != "memory"]
     return [mode for mode, present in (("eager", any(not r.get("compiled") for r in ours)),
                                        ("compiled", any(r.get("compiled") for r in ours))) if present]
 
 
 _MODES_LINE = {
+    ("default",): "vmas_ros in the default mode, as make_env builds it without flags (`--modes default`, the "
+                  "default): compiled where a C++ compiler works, up to a size, eager beyond.",
     ("eager",): "vmas_ros eager (no torch.compile).",
     ("compiled",): "vmas_ros compiled: physics through torch.compile (`--modes compiled`, or `--compile-physics`; "
                    "memory_30k eager).",
@@ -396,6 +412,8 @@ def write_suite_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dic
         "baseline_rss_mb is its RSS after the imports. For the other rows peak_rss_mb is this process's "
         "high-water mark when the point ended, both sides together.",
         "mpe_1k: MPE (mpe2) steps one env at a time, as in the VMAS paper; vmas_ros uses its own random actions.",
+        "Default mode (default_mode=true): vmas_ros built as make_env builds it without flags; compiled says "
+        "whether that compiled the physics.",
         "Modes: compiled rows (compiled=true) ran vmas_ros's physics through torch.compile, compiled during the "
         "untimed warm-up runs; with both modes their side is vmas_ros_compiled. memory_30k is measured eager only.",
     ]

@@ -51,6 +51,7 @@ class Timing:
     threads: int  # torch.get_num_threads() during the runs
     peak_rss_mb: Optional[float] = None  # the whole process's high-water mark when timing ended
     torch_peak_mb: Optional[float] = None  # CUDA only: max torch memory allocated during the runs
+    first_run_s: Optional[float] = None  # the first (untimed) warm-up call: what a fresh env costs, compiling included
     extra: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -126,10 +127,12 @@ def time_alternating(
         raise ValueError(f"warmup must be a non-negative int, got {warmup!r}")
     times: Dict[str, List[float]] = {name: [] for name in cases}
     torch_peak: Dict[str, Optional[float]] = {name: None for name in cases}
+    first: Dict[str, Optional[float]] = {name: None for name in cases}
     with pinned_threads(threads) as in_effect:
         for _ in range(warmup):
-            for case in cases.values():
-                _call(case, case.warmup_run or case.run)
+            for name, case in cases.items():
+                seconds = _call(case, case.warmup_run or case.run)
+                first[name] = seconds if first[name] is None else first[name]
         for index in range(repeats):
             for name, case in cases.items():
                 if _is_cuda(case.device):
@@ -153,6 +156,7 @@ def time_alternating(
             threads=in_effect,
             peak_rss_mb=rss,
             torch_peak_mb=torch_peak[name],
+            first_run_s=first[name],
         )
         for name, values in times.items()
     }
