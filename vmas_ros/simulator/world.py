@@ -29,6 +29,7 @@ from vmas_ros.simulator.entities import Agent, Entity, Landmark
 from vmas_ros.simulator.action_block import ActionBlock
 from vmas_ros.simulator.physics.actions import agents_action_input
 from vmas_ros.simulator.physics.joints import fixed_rotations
+from vmas_ros.simulator.physics.pipeline import advance
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 from vmas_ros.simulator.tables import PAIR_KINDS, WorldTables, build_tables
 from vmas_ros.simulator.utils import (
@@ -329,6 +330,8 @@ class World:
                     agent.state._c = agent.action.c
 
     def _advance(self, state, tables, params, actions, fixed_rotation, kernels):
+        if not self._compiled.compiled:  # the eager step: straight to the pipeline
+            return advance(state, tables, params, actions, fixed_rotation, kernels)
         return self._compiled.advance(state, tables, params, actions, fixed_rotation, kernels)
 
     def fall_back_to_eager(self, error: BaseException) -> None:
