@@ -1,11 +1,14 @@
 """lifecycle: the last shutdown tolerates rclpy's own signal handling finishing it first."""
 from __future__ import annotations
 
+import signal
+
 import pytest
 import rclpy
+import rclpy.node
 from rclpy._rclpy_pybind11 import RCLError
 
-from vmas_ros.ros import lifecycle
+from vmas_ros.ros import lifecycle, startup
 
 pytestmark = pytest.mark.ros
 
@@ -35,3 +38,37 @@ def test_other_shutdown_errors_still_raise(monkeypatch):
     finally:
         monkeypatch.undo()
         rclpy.try_shutdown()
+
+
+class _FailingNode(rclpy.node.Node):
+    """A node whose first timer callback raises what rclpy's C++ code raised when a SIGINT landed inside
+    take_message; ``signalled`` first marks the signal as received, as the entry point's handler does."""
+
+    def __init__(self, signalled: bool) -> None:
+        super().__init__("lifecycle_failing_node")
+        self.create_timer(0.01, lambda: self._fail(signalled))
+
+    @staticmethod
+    def _fail(signalled: bool) -> None:
+        if signalled:
+            startup._guard.stopping = True
+        raise RuntimeError("Unable to convert call argument '0' to Python object")
+
+
+@pytest.mark.parametrize("signalled", [True, False])
+def test_an_error_out_of_a_stop_signal_is_a_clean_stop(monkeypatch, signalled):
+    """A SIGINT's KeyboardInterrupt raised inside rclpy's C++ code can come out as another error: after a
+    stop signal that is a clean exit (0); without one the error is the node's and propagates."""
+    monkeypatch.setattr(startup, "_guard", startup._Guard("lifecycle_test"))
+    startup._guard.handed_over = True  # what run_node's hand_over() does; the handler is not installed
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        if signalled:
+            assert lifecycle.run_node("lifecycle_test", lambda: _FailingNode(True), argv=["lifecycle_test"]) == 0
+        else:
+            with pytest.raises(RuntimeError, match="Unable to convert call argument"):
+                lifecycle.run_node("lifecycle_test", lambda: _FailingNode(False), argv=["lifecycle_test"])
+    finally:
+        for sig, handler in handlers.items():  # run_node ignores both signals while it cleans up
+            signal.signal(sig, handler)
+    assert not rclpy.ok()

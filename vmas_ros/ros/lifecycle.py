@@ -133,9 +133,11 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 0
     except Exception:
-        if rclpy.ok():
+        if rclpy.ok() and not startup.stop_requested():
             raise
-        code = 0  # a callback raced the shutdown a signal started: still a clean exit
+        # a callback raced the shutdown a signal started, or the signal's KeyboardInterrupt came out of
+        # rclpy's C++ code as another error: still a clean exit
+        code = 0
     finally:
         # a second Ctrl-C or SIGTERM (or one sent to the whole process group) must not break the clean-up
         signal.signal(signal.SIGINT, signal.SIG_IGN)

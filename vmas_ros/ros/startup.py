@@ -32,7 +32,7 @@ import signal
 import sys
 from typing import Optional
 
-__all__ = ["guard", "hand_over", "policy_node_main", "sim_node_main"]
+__all__ = ["guard", "hand_over", "policy_node_main", "sim_node_main", "stop_requested"]
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -48,6 +48,7 @@ class _Guard:
         self.handed_over = False
         self._holding = 0  # nesting depth of hold(); main thread only, like the handler itself
         self._held = False
+        self.stopping = False  # a signal asked the running node to stop
 
     def __call__(self, signum: int, frame) -> None:
         if not self.handed_over:
@@ -56,6 +57,7 @@ class _Guard:
                              "the node existed (nothing was recorded)\n")
             sys.stderr.flush()
             os._exit(0)
+        self.stopping = True
         if self._holding:
             self._held = True  # raised by release(), once the write is complete
             return
@@ -88,6 +90,13 @@ def hand_over() -> None:
     """The node is about to be built (rclpy is initialised): signals now stop it through KeyboardInterrupt."""
     if _guard is not None:
         _guard.handed_over = True
+
+
+def stop_requested() -> bool:
+    """Whether SIGINT or SIGTERM asked the running node to stop: an error raised while the signal was
+    being turned into KeyboardInterrupt (inside rclpy's C++ code it can come out as another exception)
+    is then part of a clean stop."""
+    return _guard is not None and _guard.stopping
 
 
 def sim_node_main() -> int:
