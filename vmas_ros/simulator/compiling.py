@@ -1,7 +1,8 @@
 """torch.compile for one world: private code copies, and scenario kernels that follow the world's choice.
 
-``World.compile_physics()`` turns the compiled path on for a world (off by
-default: compiling takes seconds and needs a C++ compiler on the CPU). Scenario
+``World.compile_physics()`` turns the compiled path on for a world (a World
+built directly stays eager; ``make_env`` turns it on where a compiler works,
+see :mod:`vmas_ros.simulator.compile_default`). Scenario
 code whose hot part is a pure function of tensors wraps it in
 :class:`WorldKernel`: while the world's physics is eager the function runs as
 it is, and once the world compiles, the function is compiled too, so that one
@@ -12,10 +13,9 @@ from __future__ import annotations
 
 import functools
 import re
+import sys
 import types
 from typing import Callable, Dict, Hashable, Optional, Sequence
-
-import sys
 
 import torch
 

@@ -137,7 +137,7 @@ class World:
         self._invalidate_tables()
 
     def compile_physics(self, enabled: bool = True, mode: Optional[str] = None, background: bool = False) -> None:
-        """Run the physics step through ``torch.compile`` (off by default).
+        """Run the physics step through ``torch.compile`` (``make_env`` asks for it by default where it can).
 
         The step is a fixed sequence of batched kernels with no host reads, so
         the compiler fuses it into a few loops (speed-ups in docs/bench/). The
