@@ -165,9 +165,10 @@ def resolve_modes(modes: Optional[Sequence[str]] = None, compile_physics: bool =
     """The modes to measure, eager first, duplicates dropped; ValueError naming a bad one.
 
     None is the default mode alone: vmas_ros as a user gets it without flags. ``default`` is
-    measured alone (it is eager or compiled per point already); ``compile_physics=True`` is the old spelling of ``modes=("compiled",)`` and is kept so
-    existing commands and scripts still run; given with modes that say otherwise it is
-    an error rather than a silent choice of one of them.
+    measured alone (it is eager or compiled per point already). ``compile_physics=True`` is
+    the old spelling of ``modes=("compiled",)`` and is kept so existing commands and scripts
+    still run; given with modes that say otherwise it is an error rather than a silent choice
+    of one of them.
     """
     if modes is None:
         return ("compiled",) if compile_physics else ("default",)

@@ -167,7 +167,7 @@ print(json.dumps({"peak_rss_mb": status_mb("VmHWM"), "baseline_rss_mb": baseline
 
 def memory_run(side: str, unit: "Unit", steps: int, threads: int, seed: int, default_mode: bool = False) -> dict:
     """Peak RSS (MiB) of a fresh interpreter that imports only torch and ``side``'s library and steps it:
-    eager, or with ``default_mode`` as make_env builds it without flags (and without VMAS_ROS_COMPILE)."""
+    eager, or with ``default_mode`` as make_env builds it without flags."""
     if side == COMPILED_SIDE:
         raise ValueError("memory_30k is measured eager only; there is no compiled memory run")
     config = {"module": library_of(side), "scenario": unit.workload.scenario, "num_envs": unit.num_envs,
@@ -175,8 +175,7 @@ def memory_run(side: str, unit: "Unit", steps: int, threads: int, seed: int, def
     environ = dict(os.environ)
     root = str(Path(importlib.import_module("vmas_ros").__file__).resolve().parent.parent)  # source checkouts too
     environ["PYTHONPATH"] = os.pathsep.join(p for p in (root, environ.get("PYTHONPATH")) if p)
-    environ.pop("VMAS_ROS_COMPILE", None)
-    if not default_mode:
+    if not default_mode:  # the default mode keeps the caller's VMAS_ROS_COMPILE, as the timed points do
         environ["VMAS_ROS_COMPILE"] = "0"
     done = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT, json.dumps(config)], capture_output=True,
                           text=True, env=environ, check=False)

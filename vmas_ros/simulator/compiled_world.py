@@ -57,9 +57,8 @@ class CompiledWorld:
                             for kind, fn in rays.EAGER_KERNELS.items()}
 
     def advance(self, state, tables, params, actions, fixed_rotation, kernels):
-        """``(new state, kernel outputs)`` of one step (``pipeline.advance``), compiled where it is."""
-        if self.step is advance:
-            return advance(state, tables, params, actions, fixed_rotation, kernels)
+        """``(new state, kernel outputs)`` of one compiled step (``pipeline.advance``; the world calls the
+        eager one directly)."""
         try:
             return self.step(tables, state, tables, params, actions, fixed_rotation, kernels)  # keyed on tables
         except Exception as error:

@@ -401,6 +401,8 @@ class World:
         """:meth:`cast_rays` for rays given by their direction ``(cos, sin)``, each ``[B, R]``, for sensors
         that know their directions more cheaply (see ``Lidar.ray_directions``)."""
         targets = self.ray_targets(entity, entity_filter)
+        if not self._compiled.compiled:
+            return rays.cast_rays_along(entity.state.pos, targets, cos_a, sin_a, max_range, rays.EAGER_KERNELS)
         return self._compiled.cast(
             lambda kernels: rays.cast_rays_along(entity.state.pos, targets, cos_a, sin_a, max_range, kernels))
 

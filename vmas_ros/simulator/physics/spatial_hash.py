@@ -134,7 +134,6 @@ def candidates_near(qx: Tensor, qy: Tensor, queries_per_env: int, tx: Tensor, ty
     return Candidates(query, target, valid, needed)
 
 
-
 def candidates_within(qx: Tensor, qy: Tensor, queries_per_env: int, tx: Tensor, ty: Tensor, targets_per_env: int,
                       within: float, capacity: int):
     """``(candidates, capacity)``: :func:`candidates_near` with cells ``within`` wide (plus
