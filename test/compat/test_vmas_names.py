@@ -48,7 +48,7 @@ _ROWS = [  # (VMAS module, top-level names, reason): deliberate differences; "*"
      "randomness is per env (seed), not the class-wide vmas_random_state"),
     ("vmas.simulator.environment.environment",
      "ALPHABET Agent BaseScenario TorchUtils TorchVectorizedObject X Y local_seed override", _IMPORTED),
-    ("vmas.simulator.environment.rllib", "*", "RLlib's batched VectorEnvWrapper is not offered yet; use wrapper=rllib"),
+    ("vmas.simulator.environment.rllib", "Environment TorchUtils", _IMPORTED),
     ("vmas.simulator.environment.gym.base", "BaseGymWrapper",
      "each wrapper defines reset, step and render with its own library's signature"),
     ("vmas.simulator.environment.gym.base", "EnvData", "VMAS-internal record of one step; not used by our wrappers"),

@@ -72,8 +72,10 @@ def test_env_creator_seeds_copies_apart_and_checks_config():
     assert not np.array_equal(*unseeded)  # copies built from one env_config must not replay each other
     with pytest.raises(ValueError, match="'scenario'"):
         rllib_env.env_creator({"max_steps": 5})
-    with pytest.raises(ValueError, match="num_envs"):
+    with pytest.raises(ValueError, match=r"env_config\['num_envs'\] is 4, but this RLlib env holds num_envs=1"):
         rllib_env.env_creator({"scenario": "simple_spread", "num_envs": 4})
+    with pytest.raises(ValueError, match=r"env_config\['wrapper'\] is 'gym'"):
+        rllib_env.env_creator({"scenario": "simple_spread", "wrapper": "gym"})
 
 
 def test_bad_action_names_agent():
@@ -86,8 +88,11 @@ def test_bad_action_names_agent():
 
 
 def test_needs_one_env():
-    with pytest.raises(ValueError, match="num_envs=1, got num_envs=3"):
-        make(num_envs=3)
+    """The single env refuses a batch; make_env gives the batched RLlib env for one (test_wrapper_rllib_vector.py)."""
+    batch = vmas_ros.make_env("simple_spread", num_envs=3, terminated_truncated=True)
+    with pytest.raises(ValueError, match="num_envs=1, got num_envs=3; .*RLlibVectorMultiAgentEnv takes a batch"):
+        rllib_env.RLlibMultiAgentEnv(batch)
+    assert not isinstance(make(num_envs=3), MultiAgentEnv)
 
 
 @pytest.mark.slow
@@ -97,7 +102,8 @@ def test_one_ppo_iteration_on_local_ray():
 
     name = rllib_env.register("vmas_ros_test")
     batch = 40
-    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
+    # a Ray of its own (address="local"), even when another one runs on this machine
+    ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         config = (
             PPOConfig()

@@ -1,7 +1,7 @@
 """Environments: the vectorized Environment, make_env, and wrappers for RL libraries.
 
 The wrappers (``gymnasium_env``, ``gymnasium_vec``, ``pettingzoo_env``,
-``rllib_env``, ``torchrl_env``) are not imported here: ``make_env(wrapper=...)``
+``rllib_env``, ``rllib_vector``, ``torchrl_env``) are not imported here: ``make_env(wrapper=...)``
 imports the one asked for, so ``import vmas_ros`` never loads ray, pettingzoo or torchrl.
 """
 from vmas_ros.envs.environment import Environment

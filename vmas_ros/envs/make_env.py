@@ -10,14 +10,14 @@ from vmas_ros.simulator.compile_default import resolve_compile
 from vmas_ros.simulator import core as _engine  # noqa: F401  every env needs the engine: load it with make_env
 from vmas_ros.simulator.scenario import BaseScenario
 
-#: wrapper name -> (module, class), imported only when asked for: ``import vmas_ros``
-#: must not pull in ray, pettingzoo or torchrl
+#: wrapper name -> (module, class or function taking the Environment), imported only when
+#: asked for: ``import vmas_ros`` must not pull in ray, pettingzoo or torchrl
 WRAPPERS: Dict[str, Tuple[str, str]] = {
     "gym": ("vmas_ros.envs.gym_env", "GymWrapper"),
     "gymnasium": ("vmas_ros.envs.gymnasium_env", "GymnasiumWrapper"),
     "gymnasium_vec": ("vmas_ros.envs.gymnasium_vec", "GymnasiumVectorizedWrapper"),
     "pettingzoo": ("vmas_ros.envs.pettingzoo_env", "PettingZooEnv"),
-    "rllib": ("vmas_ros.envs.rllib_env", "RLlibMultiAgentEnv"),
+    "rllib": ("vmas_ros.envs.rllib_env", "wrap"),  # one env, or the batch for num_envs > 1
     "torchrl": ("vmas_ros.envs.torchrl_env", "TorchRLEnv"),
 }
 #: wrappers that report terminated and truncated apart, so make_env turns the flag on for them
@@ -72,7 +72,8 @@ def make_env(
     or a BaseScenario instance; extra keyword arguments go to its ``make_world``.
     ``wrapper`` (``"gym"``, ``"gymnasium"``, ``"gymnasium_vec"``, ``"pettingzoo"``,
     ``"rllib"``, ``"torchrl"`` or a ``Wrapper`` member) returns that library's env
-    instead, built with ``wrapper_kwargs``; the gymnasium, pettingzoo and rllib
+    instead, built with ``wrapper_kwargs`` (``"rllib"`` with ``num_envs > 1`` gives the
+    batched RLlib env, vmas_ros/envs/rllib_vector.py); the gymnasium, pettingzoo and rllib
     ones always get ``terminated_truncated=True`` because those APIs report the
     two apart (VMAS asks the caller to pass it), while ``"gym"`` needs it False.
     ``compile_physics`` (not in VMAS): True runs the physics step through

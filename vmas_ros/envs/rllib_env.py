@@ -1,11 +1,16 @@
-"""``make_env(..., num_envs=1, wrapper="rllib")``: one environment as an RLlib ``MultiAgentEnv``.
+"""``make_env(..., wrapper="rllib")``: the Environment for RLlib's new API stack (ray 2.x).
 
-For RLlib's new API stack (ray 2.x ``MultiAgentEnvRunner``): ``possible_agents``,
+With ``num_envs=1`` it is one :class:`RLlibMultiAgentEnv`: ``possible_agents``,
 ``agents``, ``observation_spaces`` and ``action_spaces`` dicts by agent name,
 ``reset() -> (obs, infos)``, ``step(action_dict) -> (obs, rewards, terminateds,
 truncateds, infos)`` with the ``"__all__"`` key in ``terminateds`` and
-``truncateds``. RLlib vectorizes by building ``num_envs_per_env_runner`` env
-copies itself, so each copy holds one env (``num_envs=1``).
+``truncateds``. RLlib's default ``MultiAgentEnvRunner`` builds
+``num_envs_per_env_runner`` such copies and steps them one after another.
+
+With ``num_envs > 1`` it is the batched
+:class:`~vmas_ros.envs.rllib_vector.RLlibVectorMultiAgentEnv`, which steps
+all envs in one call; RLlib runs it through
+:class:`~vmas_ros.envs.rllib_vector.BatchedMultiAgentEnvRunner`.
 
 ``register(name)`` makes the env known to Ray's tune registry so a config can say
 ``.environment("vmas_ros", env_config={"scenario": "simple_spread", ...})``.
@@ -21,7 +26,7 @@ from vmas_ros.envs import wrapper_common as common
 from vmas_ros.envs.environment import Environment
 from vmas_ros.envs.gymnasium_env import RENDER_MODES, check_render_mode
 
-__all__ = ["RLlibMultiAgentEnv", "env_creator", "register"]
+__all__ = ["RLlibMultiAgentEnv", "env_creator", "from_config", "register", "wrap"]
 
 #: the seed of env copy (worker w, vector index v) is seed + w * SEED_STRIDE + v
 SEED_STRIDE = 1000
@@ -43,7 +48,7 @@ class RLlibMultiAgentEnv(common.SingleEnvWrapper, MultiAgentEnv):
 
     def __init__(self, env: Environment, render_mode: Optional[str] = "rgb_array") -> None:
         common.require_single_env(
-            env, "rllib", "; RLlib builds num_envs_per_env_runner copies of the env itself"
+            env, "rllib", "; vmas_ros.envs.rllib_vector.RLlibVectorMultiAgentEnv takes a batch"
         )
         common.require_terminated_truncated(env, "rllib")
         super().__init__()
@@ -76,6 +81,22 @@ class RLlibMultiAgentEnv(common.SingleEnvWrapper, MultiAgentEnv):
         return observations, rewards, terminateds, truncateds, info
 
 
+def wrap(env: Environment, render_mode: Optional[str] = "rgb_array", batched: Optional[bool] = None) -> Any:
+    """What ``make_env(wrapper="rllib")`` returns: an :class:`RLlibMultiAgentEnv` or the batched env.
+
+    ``batched=None`` picks by ``env.num_envs``: the single env for one, the
+    batched :class:`~vmas_ros.envs.rllib_vector.RLlibVectorMultiAgentEnv` for
+    more; True gives the batched env also for one.
+    """
+    if not (env.num_envs > 1 if batched is None else batched):
+        return RLlibMultiAgentEnv(env, render_mode=render_mode)
+    from vmas_ros.envs.rllib_vector import RLlibVectorMultiAgentEnv
+
+    vector = RLlibVectorMultiAgentEnv(env)
+    vector.render_mode = check_render_mode(render_mode)
+    return vector
+
+
 def env_creator(config: Optional[Mapping[str, Any]] = None) -> RLlibMultiAgentEnv:
     """Build the RLlib env from an ``env_config`` dict (what Ray's registry calls).
 
@@ -89,17 +110,39 @@ def env_creator(config: Optional[Mapping[str, Any]] = None) -> RLlibMultiAgentEn
     ``.debugging(seed=...)`` (RLlib then resets copy ``i`` with ``seed + i``). Without
     a ``seed`` in env_config each copy draws a fresh one from the OS.
     """
-    from vmas_ros.envs.make_env import make_env
+    return from_config(config)
+
+
+def from_config(
+    config: Optional[Mapping[str, Any]], num_envs: int = 1, batched: bool = False, **overrides: Any
+) -> Any:
+    """The RLlib env an ``env_config`` describes (see :func:`env_creator`), with ``num_envs`` envs.
+
+    ``batched=False`` (``num_envs`` must be 1) gives an :class:`RLlibMultiAgentEnv`,
+    ``batched=True`` a :class:`~vmas_ros.envs.rllib_vector.RLlibVectorMultiAgentEnv`
+    of ``num_envs`` envs, also for one. ``overrides`` are further ``make_env``
+    arguments that win over the config's.
+    """
+    from vmas_ros.envs.make_env import make_env, wrapper_name
 
     options = dict(config or {})
     if "scenario" not in options:
         raise ValueError(f"env_config needs a 'scenario' (a name or a BaseScenario), got keys {sorted(options)}")
+    if not batched and num_envs != 1:
+        raise ValueError(f"one RLlibMultiAgentEnv holds num_envs=1, got num_envs={num_envs}; pass batched=True")
     scenario = options.pop("scenario")
     scenario_kwargs = dict(options.pop("scenario_kwargs", None) or {})
     wrapper_kwargs = dict(options.pop("wrapper_kwargs", None) or {})
-    for key in ("num_envs", "wrapper"):
-        if key in options and options.pop(key) not in (1, "rllib"):
-            raise ValueError(f"env_config[{key!r}] cannot be changed for the RLlib env (num_envs=1, wrapper='rllib')")
+    wrapper = options.pop("wrapper", "rllib")
+    if wrapper_name(wrapper) != "rllib":
+        raise ValueError(f"env_config['wrapper'] is {wrapper!r}; the RLlib env is always wrapper='rllib'")
+    if options.get("num_envs", num_envs) != num_envs:
+        raise ValueError(
+            f"env_config['num_envs'] is {options['num_envs']!r}, but this RLlib env holds num_envs={num_envs}: "
+            f"to batch N envs in one runner, leave it out and use env_runner_cls=BatchedMultiAgentEnvRunner "
+            f"with num_envs_per_env_runner=N (vmas_ros.envs.rllib_vector)"
+        )
+    options.pop("num_envs", None)
     seed = options.pop("seed", None)
     if seed is None:
         # RLlib builds all copies of one runner from the same env_config: a fixed default
@@ -107,8 +150,10 @@ def env_creator(config: Optional[Mapping[str, Any]] = None) -> RLlibMultiAgentEn
         seed = int(np.random.SeedSequence().generate_state(1)[0])
     else:
         seed = int(seed) + getattr(config, "worker_index", 0) * SEED_STRIDE + getattr(config, "vector_index", 0)
+    options.update(overrides)
     return make_env(
-        scenario, num_envs=1, wrapper="rllib", seed=seed, wrapper_kwargs=wrapper_kwargs, **options, **scenario_kwargs
+        scenario, num_envs=num_envs, wrapper="rllib", seed=seed, wrapper_kwargs={**wrapper_kwargs, "batched": batched},
+        **options, **scenario_kwargs,
     )
 
 

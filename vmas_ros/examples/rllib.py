@@ -1,4 +1,5 @@
-"""Train a VMAS scenario with RLlib: see vmas_ros/envs/rllib_env.py (``register``) and vmas_ros/train/.
+"""Train a VMAS scenario with RLlib: see vmas_ros/envs/rllib_env.py (``register``), vmas_ros/envs/rllib_vector.py
+(``BatchedMultiAgentEnvRunner``) and vmas_ros/train/.
 
 VMAS keeps an RLlib training script at this path; ours only points at the RLlib
 env, so that importing the path needs neither ray nor wandb.
