@@ -19,6 +19,9 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 # eager physics for the envs the tests build (the default mode compiles each; see test/conftest.py)
 export VMAS_ROS_COMPILE="${VMAS_ROS_COMPILE:-0}"
+# Ray on loopback only, and no usage reports to Ray's servers (the Ray cluster tests)
+export RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0
+export RAY_USAGE_STATS_ENABLED=0
 export PATH="$VENV/bin:$PATH"
 echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE" \
      "RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"

@@ -32,6 +32,10 @@ def pytest_configure(config):
     # step (seconds each); the tests of that default set it themselves (test_compile_default.py).
     # Nodes and scripts the tests start inherit it.
     os.environ.setdefault("VMAS_ROS_COMPILE", "0")
+    # Ray on this machine only: every node binds to 127.0.0.1 (by default Ray takes the
+    # host's own address) and nothing is reported to Ray's usage servers.
+    os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
+    os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
     # A ROS process that an earlier run (or a test) killed while it set up Fast DDS's
     # shared memory leaves a segment every later node waits for forever, inside Fast
     # DDS where no Python timeout reaches; test/ros/conftest.py sweeps again before

@@ -103,9 +103,15 @@ def run_train_command(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"vmas-ros train: {error}", file=sys.stderr)
         return 2
+    except ConnectionError as error:
+        print(f"vmas-ros train: cannot reach Ray at {config.ray_address!r}: {error}", file=sys.stderr)
+        return 2
     if state is not None:
         print(f"resuming {config.out} at iteration {trainer.iteration} ({trainer.frames} frames)")
-    summary = trainer.run()
+    try:
+        summary = trainer.run()
+    except (KeyboardInterrupt, RuntimeError) as error:
+        return _stopped_early(trainer, error)
     last = trainer.history[-1] if trainer.history else {}
     print(f"trained {config.algorithm} on {config.scenario}: {summary['iterations']} iterations, "
           f"{summary['frames']} frames; last mean episode reward {last.get('episode_reward_mean', float('nan')):.4f}")
@@ -115,6 +121,25 @@ def run_train_command(args: argparse.Namespace) -> int:
     print(f"outputs in {config.out}: log.csv, learning_curve.png, checkpoint.pt, policy.onnx + policy.json"
           + (", eval.gif" if "gif" in summary.get("eval", {}) else ""))
     return 0
+
+
+def _stopped_early(trainer, error: BaseException) -> int:
+    """Save what the completed iterations learnt and say how to continue; exit 130 on Ctrl-C, else 1."""
+    from vmas_ros.train.ray_collection import CollectorLost
+
+    if not isinstance(error, (KeyboardInterrupt, CollectorLost)):
+        trainer.close()
+        raise error
+    try:
+        trainer.save()
+    finally:
+        trainer.close()
+    config = trainer.config
+    how = "interrupted" if isinstance(error, KeyboardInterrupt) else str(error)
+    ray = f" --ray-address {config.ray_address}" if config.ray_address != "none" else ""
+    print(f"vmas-ros train: {how}; saved the checkpoint of iteration {trainer.iteration} in {config.out}; "
+          f"continue with: vmas-ros train --resume {config.out}{ray}", file=sys.stderr)
+    return 130 if isinstance(error, KeyboardInterrupt) else 1
 
 
 def add_export_arguments(parser: argparse.ArgumentParser) -> None:

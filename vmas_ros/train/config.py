@@ -56,6 +56,15 @@ class TrainConfig:
     gif: bool = field(default=True, metadata={"help": "render env 0 of the evaluation to eval.gif"})
     checkpoint_every: int = field(default=10, metadata={"help": "save checkpoint.pt every N iterations (and at the end)"})
     out: str = field(default="runs/train", metadata={"help": "output directory"})
+    # --- where the envs run (none of these changes the algorithm)
+    ray_address: str = field(default="none", metadata={
+        "help": "collect on Ray: 'local' (a Ray instance on this machine), 'auto' (the cluster `ray start` "
+                "made here), a head's host:port; 'none': step the envs in this process"})
+    collectors: int = field(default=1, metadata={
+        "help": "Ray actors stepping num_envs / collectors envs each, spread over the cluster's nodes"})
+    collector_cpus: int = field(default=1, metadata={"help": "CPUs (torch threads) each Ray collector reserves"})
+    collector_device: str = field(default="cpu", metadata={
+        "help": "torch device of the Ray collectors' envs (cuda: each collector reserves a GPU)"})
 
     def __post_init__(self) -> None:
         self.validate()
@@ -67,10 +76,19 @@ class TrainConfig:
         if not isinstance(self.scenario_kwargs, dict):
             raise ValueError(f"scenario_kwargs must be a mapping, got {type(self.scenario_kwargs).__name__}")
         for name in ("iterations", "frames_per_batch", "num_envs", "max_steps", "minibatch_size", "epochs",
-                     "num_cells", "depth", "checkpoint_every"):
+                     "num_cells", "depth", "checkpoint_every", "collectors", "collector_cpus"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive int, got {value!r}")
+        if not isinstance(self.ray_address, str) or not self.ray_address.strip():
+            raise ValueError(f"ray_address must be 'none', 'local', 'auto' or a head's host:port, "
+                             f"got {self.ray_address!r}")
+        if self.ray_address == "none" and self.collectors != 1:
+            raise ValueError(f"collectors={self.collectors} needs Ray: give ray_address ('local', 'auto' or a "
+                             f"head's host:port); without Ray the envs run in this process")
+        if self.num_envs % self.collectors:
+            raise ValueError(f"num_envs ({self.num_envs}) must be a multiple of collectors ({self.collectors}): "
+                             f"each collector steps the same number of envs")
         if self.eval_episodes < 0:
             raise ValueError(f"eval_episodes must be >= 0, got {self.eval_episodes!r}")
         if self.frames_per_batch % self.num_envs:

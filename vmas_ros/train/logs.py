@@ -22,6 +22,7 @@ LOG_COLUMNS = (
     "seconds_collect",       # time spent stepping the envs
     "seconds_train",         # time spent in GAE + PPO updates
     "seconds",               # whole iteration
+    "frames_per_second",     # frames_per_batch / seconds_collect
 )
 
 

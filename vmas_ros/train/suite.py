@@ -1,9 +1,11 @@
 """``vmas-ros train-suite``: the VMAS paper's Figure 3 (four PPO variants on four scenarios) in one command.
 
 Trains every ``--algorithms`` x ``--scenarios`` x ``--seeds`` combination one
-after another in this process (the machine has few cores; parallel runs would
-only fight over them), each with the existing :class:`~vmas_ros.train.trainer.Trainer`
-in its own folder ``<out>/runs/<scenario>_<algorithm>_seed<seed>``, then measures
+after another in this process (parallel runs on one machine would only fight
+over its cores) or, with ``--ray-address``, as Ray tasks across a cluster
+(:mod:`vmas_ros.train.suite_ray`), each with the existing
+:class:`~vmas_ros.train.trainer.Trainer` in its own folder
+``<out>/runs/<scenario>_<algorithm>_seed<seed>``, then measures
 each scenario's heuristic with the same episode length and number of envs and
 writes the report (see :mod:`vmas_ros.train.suite_report`).
 
@@ -27,6 +29,7 @@ from vmas_ros.train.cli import add_config_flags
 from vmas_ros.train.config import ALGORITHM_NAMES, TrainConfig, load_config_file
 
 __all__ = ["add_train_suite_arguments", "run_train_suite_command", "SuiteRun", "plan_runs", "train_one",
+           "check_same_settings",
            "heuristic_return", "run_name", "DEFAULT_SCENARIOS", "DONE_MARKER"]
 
 #: the paper's Figure 3 scenarios
@@ -38,7 +41,8 @@ _PER_RUN = ("scenario", "algorithm", "seed", "out", "scenario_kwargs")
 #: suite defaults that differ from ``vmas-ros train``: no per-run evaluation or GIF (the curve is the result)
 _SUITE_DEFAULTS = {"eval_episodes": 0, "gif": False}
 #: fields that may differ between a run folder and the requested config without invalidating its curve
-_MAY_DIFFER = ("iterations", "checkpoint_every", "eval_episodes", "gif", "device", "out")
+_MAY_DIFFER = ("iterations", "checkpoint_every", "eval_episodes", "gif", "device", "out", "ray_address", "collectors",
+               "collector_cpus", "collector_device")
 
 
 @dataclass
@@ -140,7 +144,7 @@ def plan_runs(args: argparse.Namespace) -> List[SuiteRun]:
 
 
 # -------------------------------------------------------------- one run
-def _check_same_settings(run: SuiteRun, stored: Dict[str, Any]) -> None:
+def check_same_settings(run: SuiteRun, stored: Dict[str, Any]) -> None:
     """Refuse to continue or reuse a folder trained with other settings: its curve would not be this run's."""
     wanted = run.config.to_dict()
     for key, value in wanted.items():
@@ -156,7 +160,7 @@ def train_one(run: SuiteRun, progress: bool = False, on_iteration=None) -> Dict[
 
     state = load_checkpoint(run.folder) if (run.folder / CHECKPOINT_NAME).is_file() else None
     if state is not None:
-        _check_same_settings(run, state["config"])
+        check_same_settings(run, state["config"])
         if (run.folder / DONE_MARKER).is_file() and int(state["iteration"]) >= run.config.iterations:
             return {"status": "skipped", "history": state["history"][:run.config.iterations]}
     status = "trained" if state is None else "resumed"
@@ -167,6 +171,47 @@ def train_one(run: SuiteRun, progress: bool = False, on_iteration=None) -> Dict[
         "iterations": trainer.iteration, "frames": trainer.frames, "status": status,
         "wall_seconds_this_session": round(time.perf_counter() - start, 2)}, indent=2) + "\n")
     return {"status": status, "history": trainer.history}
+
+
+def _train_on_ray(runs: List[SuiteRun], bar, histories: Dict[str, Any], statuses: Dict[str, str]) -> int:
+    """Train every run as a Ray task (see :mod:`vmas_ros.train.suite_ray`); non-zero exit status on failure."""
+    from vmas_ros.train.ray_collection import connect
+    from vmas_ros.train.suite_ray import train_runs_on_ray
+
+    config = runs[0].config
+    if config.collectors != 1:
+        print(f"vmas-ros train-suite: --collectors {config.collectors}: on Ray each run is one task that steps "
+              f"its own envs; give it more CPUs with --collector-cpus", file=sys.stderr)
+        return 2
+
+    def done(run: SuiteRun, result: Dict[str, Any]) -> None:
+        histories[run.name], statuses[run.name] = result["history"], result["status"]
+        bar.set_postfix_str(f"{run.name} {result['status']}")
+        bar.update(1)
+
+    try:
+        joined = connect(config.ray_address)
+    except ConnectionError as error:
+        print(f"vmas-ros train-suite: cannot reach Ray at {config.ray_address!r}: {error}", file=sys.stderr)
+        return 2
+    try:
+        failures = train_runs_on_ray(runs, config.collector_cpus, done)
+    except ValueError as error:
+        print(f"vmas-ros train-suite: {error}", file=sys.stderr)
+        return 2
+    finally:
+        if joined:
+            import ray
+
+            ray.shutdown()
+    if failures:
+        bar.close()
+        for run, reason in failures:
+            print(f"vmas-ros train-suite: {run.name} failed: {reason}", file=sys.stderr)
+        print(f"vmas-ros train-suite: {len(failures)} of {len(runs)} runs failed; the others are saved. Rerun the "
+              f"same command to retry them (finished runs are skipped)", file=sys.stderr)
+        return 1
+    return 0
 
 
 def heuristic_return(scenario: str, num_envs: int, max_steps: int, seed: int, device: str = "cpu") -> Dict[str, float]:
@@ -208,7 +253,11 @@ def run_train_suite_command(args: argparse.Namespace) -> int:
     statuses: Dict[str, str] = {}
     start = time.perf_counter()
     bar = tqdm(total=len(runs), desc="train-suite", unit="run", disable=args.quiet, position=0)
-    for run in runs:
+    if runs[0].config.ray_address != "none":
+        code = _train_on_ray(runs, bar, histories, statuses)
+        if code:
+            return code
+    for run in (r for r in runs if r.name not in statuses):
         bar.set_postfix_str(run.name)
 
         def show(row: Dict[str, float], run: SuiteRun = run) -> None:

@@ -4,11 +4,15 @@ One iteration steps ``num_envs`` envs ``frames_per_batch / num_envs`` times with
 the stochastic policy (envs that finish are reset on the fly, the rest carry on
 into the next iteration), computes advantages with TorchRL's GAE, then runs
 ``epochs`` passes of ClipPPOLoss over minibatches drawn without replacement.
+The envs run in this process, or in ``collectors`` Ray actors when
+``ray_address`` is set (see :mod:`vmas_ros.train.collection`); the learner
+always stays here.
 
 Output directory (``config.out``)::
 
     config.json         the configuration used (a resumed run rewrites it)
     log.csv             one row per iteration (see ``logs.LOG_COLUMNS``)
+    collectors.json     where the envs ran (Ray node IDs) and each collector's frames/s
     learning_curve.png  mean episode reward against frames
     checkpoint.pt       every ``checkpoint_every`` iterations and at the end (resume from it)
     eval.json, eval.gif deterministic-policy evaluation, GIF of env 0
@@ -32,6 +36,7 @@ import vmas_ros
 from vmas_ros.envs.torchrl_env import TorchRLEnv
 from vmas_ros.train.algorithms import PPOAgent, build_agent
 from vmas_ros.train.checkpoint import CHECKPOINT_NAME, save_checkpoint
+from vmas_ros.train.collection import Collection, LocalCollection
 from vmas_ros.train.config import TrainConfig
 from vmas_ros.train.export import describe_env, export_policy
 from vmas_ros.train.logs import plot_learning_curve, write_csv
@@ -64,9 +69,11 @@ class Trainer:
         start_iteration = int(resume_state["iteration"]) if resume_state else 0
         torch.manual_seed(config.seed + 7919 * start_iteration)
         # a resumed run gets fresh env randomness, not a replay of the first iterations
-        self.env = _make_env(config, config.num_envs, config.seed + 104729 * start_iteration)
+        self.env_seed = config.seed + 104729 * start_iteration
+        on_ray = config.ray_address != "none"
+        # on Ray the collectors own the envs; this process only needs one to read the spaces from
+        self.env = _make_env(config, 1 if on_ray else config.num_envs, self.env_seed)
         self.env_info = describe_env(self.env)
-        self.torchrl_env = TorchRLEnv(self.env)
         low = torch.tensor(self.env_info["action_low"], dtype=torch.float32)
         high = torch.tensor(self.env_info["action_high"], dtype=torch.float32)
         self.agent: PPOAgent = build_agent(config, len(self.env_info["agents"]), self.env_info["observation_size"],
@@ -77,9 +84,29 @@ class Trainer:
             self._restore(resume_state)
         self.buffer = ReplayBuffer(storage=LazyTensorStorage(config.frames_per_batch, device=self.device),
                                    sampler=SamplerWithoutReplacement(), batch_size=config.minibatch_size)
-        self._td = self.torchrl_env.reset()
-        self._returns = torch.zeros(config.num_envs, device=self.device)
+        self.collection: Collection = self._start_collection() if on_ray else LocalCollection(
+            TorchRLEnv(self.env), self.agent.policy, config.steps_per_batch)
         (self.out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
+
+    def _start_collection(self) -> Collection:
+        from vmas_ros.train.ray_collection import RayCollection, connect
+
+        config = self.config
+        self._ray_connected = connect(config.ray_address)
+        env_kwargs = dict(scenario=config.scenario, num_envs=config.num_envs, continuous_actions=True,
+                          max_steps=config.max_steps, seed=self.env_seed, terminated_truncated=True,
+                          **config.scenario_kwargs)
+        return RayCollection(env_kwargs, self.agent.policy, config.steps_per_batch, config.collectors,
+                             config.collector_cpus, config.collector_device, self.device, config.ray_address)
+
+    def close(self) -> None:
+        """Stop the collectors (and leave Ray if this trainer joined it); safe to call twice."""
+        self.collection.close()
+        if getattr(self, "_ray_connected", False):
+            import ray
+
+            ray.shutdown()
+            self._ray_connected = False
 
     # ------------------------------------------------------------- checkpoints
     def _restore(self, state: Dict[str, Any]) -> None:
@@ -107,26 +134,17 @@ class Trainer:
         })
 
     # ---------------------------------------------------------------- collect
-    @torch.no_grad()
     def collect(self) -> tuple:
-        """Step all envs ``steps_per_batch`` times; returns the batch [num_envs, T] and finished episode returns."""
-        env, policy = self.torchrl_env, self.agent.policy
-        steps, finished = [], []
-        td = self._td
-        with set_exploration_type(ExplorationType.RANDOM):
-            for _ in range(self.config.steps_per_batch):
-                td = policy(td)
-                step, td = env.step_and_maybe_reset(td)
-                steps.append(step)
-                nxt = step.get("next")
-                self._returns += nxt.get(("agents", "reward")).mean(dim=(1, 2))
-                done = nxt.get("done").squeeze(-1)
-                finished.append(torch.where(done, self._returns, torch.nan))
-                self._returns = torch.where(done, 0.0, self._returns)
-        self._td = td
-        episodes = torch.stack(finished)
-        episodes = episodes[~torch.isnan(episodes)]
-        return torch.stack(steps, dim=1), episodes
+        """One batch ``[num_envs, steps_per_batch]`` and the returns of the episodes that ended in it."""
+        return self.collection.collect()
+
+    def write_collectors(self) -> Path:
+        """``collectors.json``: where each collector ran and its frames/s so far."""
+        path = self.out / "collectors.json"
+        tmp = path.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps({**self.collection.describe(), "iteration": self.iteration}, indent=2) + "\n")
+        tmp.replace(path)
+        return path
 
     # ------------------------------------------------------------------ train
     def update(self, batch: TensorDict) -> Dict[str, float]:
@@ -160,6 +178,7 @@ class Trainer:
         batch, episodes = self.collect()
         collected = time.perf_counter()
         losses = self.update(batch)
+        self.collection.policy_updated()
         end = time.perf_counter()
         self.iteration += 1
         self.frames += self.config.frames_per_batch
@@ -172,6 +191,7 @@ class Trainer:
             "loss_critic": losses.get("loss_critic", math.nan),
             "loss_entropy": losses.get("loss_entropy", math.nan), "entropy": losses.get("entropy", math.nan),
             "seconds_collect": collected - start, "seconds_train": end - collected, "seconds": end - start,
+            "frames_per_second": self.config.frames_per_batch / (collected - start),
         }
         self.history.append(row)
         return row
@@ -189,6 +209,7 @@ class Trainer:
             bar.set_postfix(reward=f"{row['episode_reward_mean']:.3f}", step_reward=f"{row['step_reward_mean']:.4f}",
                             s=f"{row['seconds']:.1f}")
             write_csv(self.out / "log.csv", self.history)
+            self.write_collectors()
             if self.iteration % config.checkpoint_every == 0:
                 self.save()
             if on_iteration is not None:
@@ -197,9 +218,10 @@ class Trainer:
         return self.finish()
 
     def finish(self) -> Dict[str, Any]:
-        """Final checkpoint, CSV, learning curve, evaluation (+ GIF) and ONNX export."""
+        """Final checkpoint, CSV, learning curve, evaluation (+ GIF) and ONNX export; stops the collectors."""
         config = self.config
         self.save()
+        self.close()
         summary: Dict[str, Any] = {"out": str(self.out), "iterations": self.iteration, "frames": self.frames}
         if self.history:
             write_csv(self.out / "log.csv", self.history)
