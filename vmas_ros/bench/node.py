@@ -131,7 +131,7 @@ def _topics(node, kinds) -> Dict[str, str]:
     """topic -> type name of the node's publishers in the chosen kinds."""
     wanted = {}
     messages = node.state_messages
-    resolved = [p.topic_name for p in node.state_pub.publishers]
+    resolved = node.state_pub.topic_names
     for topic, kind in zip(resolved, messages.types):
         leaf = topic.rsplit("/", 1)[-1]
         group = ("clock" if topic == "/clock" else "scan" if leaf.startswith("scan") else

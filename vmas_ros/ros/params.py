@@ -156,6 +156,8 @@ SIM_PARAMS = ParamTable("sim_node", [
     Param("unpaced_batch_ms", 4.0, "unpaced only: wall milliseconds of steps per executor round", runtime=True,
           minimum=0.0, maximum=MAX_UNPACED_BATCH_MS, note="(0: one step per executor round)"),
     Param("frame_id", "world", "world frame of poses, odometry and markers", check=_not_empty("frame_id")),
+    Param("publish_clock", True, "publish /clock; false when another node of the graph owns the clock "
+          "(a recording keeps this node's own)"),
     Param("add_lidar", True, "give every agent without a lidar one, so ROS consumers always get scans"),
     Param("lidar_rays", 16, "rays of that lidar, evenly over 360 degrees", minimum=1, maximum=MAX_LIDAR_RAYS),
     Param("lidar_range", 2.0, "range of that lidar, m", minimum=0.0, strict=True),

@@ -341,9 +341,13 @@ class StateMessages:
 
 
 class StatePublisher:
-    """The publishers of ``StateMessages`` on a node; publishes a step's bytes and hands them to ``record``."""
+    """The publishers of ``StateMessages`` on a node; publishes a step's bytes and hands them to ``record``.
 
-    def __init__(self, node, messages: StateMessages, qos) -> None:
+    ``publish_clock=False`` leaves ``/clock`` off the graph (another node owns the clock) while a
+    recording still gets it: a bag's steps are this node's own.
+    """
+
+    def __init__(self, node, messages: StateMessages, qos, publish_clock: bool = True) -> None:
         from geometry_msgs.msg import PoseArray, PoseStamped
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
@@ -353,9 +357,13 @@ class StatePublisher:
         classes = {type_name(c): c for c in (PoseArray, PoseStamped, Odometry, Clock, LaserScan, PointCloud2,
                                               MarkerArray)}
         self.messages = messages
+        self._on_graph = [i for i, topic in enumerate(messages.topics) if publish_clock or topic != "/clock"]
         # no default event handlers: they cost every executor round (QosAudit warns instead)
-        self.publishers = [node.create_publisher(classes[kind], topic, qos, event_callbacks=quiet_publisher_events())
-                           for topic, kind in zip(messages.topics, messages.types)]
+        self.publishers = [node.create_publisher(classes[messages.types[i]], messages.topics[i], qos,
+                                                 event_callbacks=quiet_publisher_events()) for i in self._on_graph]
+        resolved = dict(zip(self._on_graph, (p.topic_name for p in self.publishers)))
+        #: each message's resolved topic, in ``messages.topics`` order (``/clock`` also when not published)
+        self.topic_names = [resolved.get(i, topic) for i, topic in enumerate(messages.topics)]
         # rclpy's Publisher.publish takes its handle's lock and type-checks each message, a large share of
         # the cost of publishing bytes. The node publishes and destroys its publishers on one thread,
         # never at once, so it calls the bound rcl publisher directly where this rclpy has one.
@@ -370,11 +378,12 @@ class StatePublisher:
         if record is None and not any(p.get_subscription_count() for p in self.publishers):
             return
         data, spans = self.messages._data, self.messages.spans
-        for send, (a, b) in zip(self._send, spans):
+        for send, i in zip(self._send, self._on_graph):
+            a, b = spans[i]
             send(data[a:b])
         if record is not None:
-            for publisher, kind, (a, b) in zip(self.publishers, self.messages.types, spans):
-                record(publisher.topic_name, kind, data[a:b])
+            for topic, kind, (a, b) in zip(self.topic_names, self.messages.types, spans):
+                record(topic, kind, data[a:b])
 
 
 class StepPhases:

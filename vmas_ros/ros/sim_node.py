@@ -194,7 +194,10 @@ class SimNode(StepLoop, Node):
         self._per_env_colours = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
         if self._per_env_colours:
             self.state_messages.set_colour_fields(self._per_env_colours)
-        self.state_pub = StatePublisher(self, self.state_messages, RELIABLE)
+        self.state_pub = StatePublisher(self, self.state_messages, RELIABLE, publish_clock=self.params.publish_clock)
+        if not self.params.publish_clock:
+            self.get_logger().info("publish_clock is false: /clock comes from another node; this node's stamps "
+                                   "are its own simulation time")
         self.phases: Optional[StepPhases] = None  # set by `vmas-ros bench node` to time each part of a step
         self.tf_pub = None
         if TFMessage is None:

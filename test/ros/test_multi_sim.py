@@ -1,0 +1,54 @@
+"""Two sim_nodes in one ROS graph: namespaces keep topics and commands apart, and one node owns /clock."""
+from __future__ import annotations
+
+import math
+import signal
+
+import pytest
+from geometry_msgs.msg import PoseStamped, Twist
+
+from test.ros.fault_tools import FaultProcess, assert_whole_steps, read_finished
+from test.ros.sim_node_helpers import DT_NS
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def _moved(start: PoseStamped, end: PoseStamped) -> float:
+    return math.hypot(end.pose.position.x - start.pose.position.x, end.pose.position.y - start.pose.position.y)
+
+
+def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_log_dir, tmp_path):
+    bag = tmp_path / "follower.mcap"
+    owner = FaultProcess(ros, {"seed": 1}, sim_log_dir, "swarm_a")
+    follower = None
+    try:
+        owner.wait_ready(timeout=60.0)
+        follower = FaultProcess(ros, {"seed": 2, "publish_clock": False, "record_path": str(bag)}, sim_log_dir,
+                                "swarm_b")
+        follower.wait_ready(timeout=60.0)
+        poses = {label: ros.collect(PoseStamped, f"/{label}/agent_0/pose", depth=100)
+                 for label in ("swarm_a", "swarm_b")}
+        for collected in poses.values():
+            collected.wait_for(1, timeout=30.0)
+        # one clock in the graph: the owner's; the follower's topics sit under its own namespace
+        assert ros.node.count_publishers("/clock") == 1
+        topics = ros.topics()
+        assert {"/swarm_a/agent_0/pose", "/swarm_b/agent_0/pose", "/swarm_b/agent_0/cmd_vel"} <= set(topics)
+        before = {label: collected.latest for label, collected in poses.items()}
+        command = Twist()
+        command.linear.x = 0.5
+        ros.publish_for(Twist, "/swarm_a/agent_0/cmd_vel", command, seconds=2.0, period=0.1)
+        after = {label: collected.latest for label, collected in poses.items()}
+        assert _moved(before["swarm_a"], after["swarm_a"]) > 0.02, "the commanded node's agent_0 did not move"
+        assert _moved(before["swarm_b"], after["swarm_b"]) < 1e-6, "a command for swarm_a moved swarm_b's agent"
+        assert follower.stop(signal.SIGINT, timeout=30.0) == 0, follower.describe()
+        assert owner.stop(signal.SIGINT, timeout=30.0) == 0, owner.describe()
+    finally:
+        owner.kill()
+        if follower is not None:
+            follower.kill()
+    assert "publish_clock is false: /clock comes from another node" in follower.stderr()
+    # the follower's bag keeps its own steps on /clock, though it never published one
+    recorded = read_finished(bag)
+    assert recorded.count("/clock") > 0
+    assert_whole_steps(recorded, DT_NS, namespace="/swarm_b")
