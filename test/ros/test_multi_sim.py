@@ -6,6 +6,7 @@ import signal
 
 import pytest
 from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
 
 from test.ros.fault_tools import FaultProcess, assert_whole_steps, read_finished
 from test.ros.sim_node_helpers import DT_NS
@@ -28,8 +29,14 @@ def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_l
         follower.wait_ready(timeout=60.0)
         poses = {label: ros.collect(PoseStamped, f"/{label}/agent_0/pose", depth=100)
                  for label in ("swarm_a", "swarm_b")}
-        for collected in poses.values():
+        odometry = {label: ros.collect(Odometry, f"/{label}/agent_0/odom", depth=5) for label in ("swarm_a", "swarm_b")}
+        for collected in [*poses.values(), *odometry.values()]:
             collected.wait_for(1, timeout=30.0)
+        # each node's frames carry its namespace (frame_prefix: auto), so one TF tree holds both
+        for label, collected in odometry.items():
+            odom = collected.latest
+            assert (odom.header.frame_id, odom.child_frame_id) == (f"{label}/world", f"{label}/agent_0/base_link")
+            assert poses[label].latest.header.frame_id == f"{label}/world"
         # one clock in the graph: the owner's; the follower's topics sit under its own namespace
         assert ros.node.count_publishers("/clock") == 1
         topics = ros.topics()
@@ -52,3 +59,17 @@ def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_l
     recorded = read_finished(bag)
     assert recorded.count("/clock") > 0
     assert_whole_steps(recorded, DT_NS, namespace="/swarm_b")
+    _stamp, scan = recorded.messages["/swarm_b/agent_0/scan"][0]
+    assert scan.header.frame_id == "swarm_b/agent_0/base_link"
+    assert {t.header.frame_id for _, m in recorded.messages["/tf"] for t in m.transforms} == {"swarm_b/world"}
+
+
+@pytest.mark.parametrize("value, refused", [("auto", False), ("", False), ("robot_a/", False), ("a/b_2/", False),
+                                            ("/robot_a/", True), ("robot a/", True), ("a//b", True)])
+def test_frame_prefix_values(value, refused):
+    from vmas_ros.ros.params import _frame_prefix
+
+    message = _frame_prefix(value, None)
+    assert (message is not None) == refused
+    if refused:
+        assert repr(value) in message and "'robot_a/'" in message

@@ -71,6 +71,15 @@ def _not_empty(name: str, why: str = ""):
     return lambda value, current: None if value else f"{name} must not be empty{why}"
 
 
+def _frame_prefix(value: str, current) -> Optional[str]:
+    if value == "auto" or value == "":
+        return None
+    if value.startswith("/") or not all(c.isalnum() or c in "_/" for c in value) or "//" in value:
+        return (f"frame_prefix {value!r} is not a frame name prefix: expected 'auto', '' or letters, digits, "
+                f"'_' and '/' not starting with '/', e.g. 'robot_a/'")
+    return None
+
+
 def _control(value: str, current) -> Optional[str]:
     if value == "policy" and current is not None and not current.policy_path:
         return "control: policy needs policy_path (an exported policy's .json), set when the node starts"
@@ -156,6 +165,8 @@ SIM_PARAMS = ParamTable("sim_node", [
     Param("unpaced_batch_ms", 4.0, "unpaced only: wall milliseconds of steps per executor round", runtime=True,
           minimum=0.0, maximum=MAX_UNPACED_BATCH_MS, note="(0: one step per executor round)"),
     Param("frame_id", "world", "world frame of poses, odometry and markers", check=_not_empty("frame_id")),
+    Param("frame_prefix", "auto", "put before every frame name (world and <agent>/base_link); "
+          "auto: the node's namespace, e.g. 'swarm_a/' under /swarm_a, nothing at the root", check=_frame_prefix),
     Param("publish_clock", True, "publish /clock; false when another node of the graph owns the clock "
           "(a recording keeps this node's own)"),
     Param("add_lidar", True, "give every agent without a lidar one, so ROS consumers always get scans"),

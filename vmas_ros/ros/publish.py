@@ -63,6 +63,7 @@ class StateMessages:
     order. Values go in as ``convert`` computes them (float32 arithmetic where it
     uses float32, ``math`` for trigonometry), so the bytes equal the per-field path.
 
+    ``frame_id`` is the world frame as published; ``frame_prefix`` goes before each ``<agent>/base_link``.
     ``per_agent``: every agent's own pose, odometry and scans (a swarm leaves them out: its agents
     are in ``agents/poses``); ``cloud``: ``lidar/points``, every lidar ray's hit as a point of one
     ``sensor_msgs/PointCloud2`` in the world frame (NaN for a ray that hit nothing).
@@ -70,7 +71,8 @@ class StateMessages:
 
     def __init__(self, agent_names: Sequence[str], n_landmarks: int, n_entities: int,
                  scan_geometry: Dict[int, List[convert.ScanGeometry]], scan_rays: Dict[int, List[int]],
-                 frame_id: str, markers, per_agent: bool = True, cloud: bool = False) -> None:
+                 frame_id: str, markers, per_agent: bool = True, cloud: bool = False,
+                 frame_prefix: str = "") -> None:
         from geometry_msgs.msg import Pose, PoseArray, PoseStamped
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
@@ -93,7 +95,7 @@ class StateMessages:
                 pose.message.header.frame_id = frame_id
                 pose.f64 = self._pose_fields("pose", k)
                 odom = _Template(f"{name}/odom", Odometry(), stamps=["header.stamp"])
-                odom.message.header.frame_id, odom.message.child_frame_id = frame_id, f"{name}/base_link"
+                odom.message.header.frame_id, odom.message.child_frame_id = frame_id, f"{frame_prefix}{name}/base_link"
                 t = self._twist_base + 3 * i
                 odom.f64 = self._pose_fields("pose.pose", k) + [
                     ("twist.twist.linear.x", t), ("twist.twist.linear.y", t + 1), ("twist.twist.angular.z", t + 2)]
@@ -104,7 +106,7 @@ class StateMessages:
                     topic = f"{name}/scan" if j == 0 else f"{name}/scan_{j}"
                     scan = _Template(topic, LaserScan(), stamps=["header.stamp"])
                     convert.fill_scan(scan.message, geometry, np.zeros(0, np.float32))
-                    scan.message.header.frame_id = f"{name}/base_link"
+                    scan.message.header.frame_id = f"{frame_prefix}{name}/base_link"
                     scan.arrays = [("ranges", ranges_offset, n_rays)]
                     templates.append(scan)
                 ranges_offset += n_rays

@@ -173,7 +173,8 @@ class SimNode(StepLoop, Node):
         world = self.env.world
         self.agent_names = convert.unique_names([a.name for a in world.agents])
         self.scan_geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in self.lidars.items()}
-        frame = self.params.frame_id
+        self.frame_prefix = self._frame_prefix()
+        frame = self.world_frame = self.frame_prefix + self.params.frame_id
         # a swarm's agents go out in aggregated topics only; cmd_vel stays for the agents named
         self.per_agent = self.params.per_agent(len(self.agent_names))
         self.cmd_vel_agents = self._cmd_vel_agents()
@@ -190,7 +191,7 @@ class SimNode(StepLoop, Node):
         self.state_messages = StateMessages(
             self.agent_names, len(world.landmarks), len(world.entities), self.scan_geometry,
             {i: [s.n_rays for s in ls] for i, ls in self.lidars.items()}, frame, self.markers,
-            per_agent=self.per_agent, cloud=not self.per_agent)
+            per_agent=self.per_agent, cloud=not self.per_agent, frame_prefix=self.frame_prefix)
         self._per_env_colours = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
         if self._per_env_colours:
             self.state_messages.set_colour_fields(self._per_env_colours)
@@ -214,6 +215,13 @@ class SimNode(StepLoop, Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
+
+    def _frame_prefix(self) -> str:
+        """``frame_prefix``, with ``auto`` as the namespace (``/swarm_a`` -> ``swarm_a/``; the root: none)."""
+        if self.params.frame_prefix != "auto":
+            return self.params.frame_prefix
+        namespace = self.get_namespace().strip("/")
+        return f"{namespace}/" if namespace else ""
 
     def _cmd_vel_agents(self) -> List[int]:
         """Indices of the agents that take ``<agent>/cmd_vel``: all of them with per-agent topics, else
@@ -247,7 +255,8 @@ class SimNode(StepLoop, Node):
 
         try:
             bridge = FoxgloveBridge(  # a swarm: the scene shows every agent, no channels per agent
-                host=p.foxglove_host, port=p.foxglove_port, frame_id=p.frame_id,
+                host=p.foxglove_host, port=p.foxglove_port, frame_id=self.world_frame,
+                frame_prefix=self.frame_prefix,
                 agent_names=self.agent_names if self.per_agent else (), on_twist=self._on_foxglove_twist,
             )
         except (RuntimeError, OSError) as error:
@@ -383,7 +392,8 @@ class SimNode(StepLoop, Node):
         for i, name in enumerate(self.agent_names):
             x, y, yaw = snap.pos[n_landmarks + i, 0], snap.pos[n_landmarks + i, 1], snap.rot[n_landmarks + i]
             tf = TransformStamped()
-            tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, self.params.frame_id, f"{name}/base_link"
+            tf.header.stamp, tf.header.frame_id = stamp, self.world_frame
+            tf.child_frame_id = f"{self.frame_prefix}{name}/base_link"
             tf.transform.translation.x, tf.transform.translation.y = float(x), float(y)
             r = tf.transform.rotation
             r.x, r.y, r.z, r.w = convert.yaw_to_quaternion(float(yaw))

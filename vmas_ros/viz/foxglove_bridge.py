@@ -157,6 +157,7 @@ class FoxgloveBridge:
         host: interface to listen on; 127.0.0.1 by default (only this machine).
         port: TCP port; 0 picks a free one, read back from ``.port``.
         frame_id: fixed frame of the scene, poses and transforms.
+        frame_prefix: goes before each agent's ``<agent>/base_link`` frame.
         agent_names: ROS-style agent names (``convert.unique_names``), in
             ``world.agents`` order; they name topics and frames.
         on_twist: ``on_twist(agent_index, vx, vy, wz)`` for each valid Twist a
@@ -187,6 +188,7 @@ class FoxgloveBridge:
         agent_names: Sequence[str] = (),
         on_twist: Optional[TwistCallback] = None,
         *,
+        frame_prefix: str = "",
         scan_no_return: str = "inf",
         name: str = "vmas_ros",
     ) -> None:
@@ -198,7 +200,7 @@ class FoxgloveBridge:
         if len(set(names)) != len(names):
             raise ValueError(f"agent names must be unique, got {names}")
         self.host = host
-        self.frame_id = frame_id
+        self.frame_id, self.frame_prefix = frame_id, frame_prefix
         self.agent_names: List[str] = names
         self.scan_no_return = scan_no_return
         self._closed = False
@@ -290,7 +292,8 @@ class FoxgloveBridge:
                     k = first_agent + i
                     qx, qy, qz, qw = yaw_to_quaternion(float(rot[k]))
                     transforms.append(FrameTransform(
-                        timestamp=stamp, parent_frame_id=self.frame_id, child_frame_id=f"{name}/base_link",
+                        timestamp=stamp, parent_frame_id=self.frame_id,
+                        child_frame_id=f"{self.frame_prefix}{name}/base_link",
                         translation=Vector3(x=float(pos[k, 0]), y=float(pos[k, 1]), z=0.0),
                         rotation=Quaternion(x=qx, y=qy, z=qz, w=qw),
                     ))
@@ -326,7 +329,7 @@ class FoxgloveBridge:
             values = np.minimum(values, geometry.range_max)
         return LaserScan(
             timestamp=stamp,
-            frame_id=f"{self.agent_names[agent_index]}/base_link",
+            frame_id=f"{self.frame_prefix}{self.agent_names[agent_index]}/base_link",
             pose=Pose(position=Vector3(), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
             start_angle=geometry.angle_min,
             end_angle=geometry.angle_max,
