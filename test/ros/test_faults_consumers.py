@@ -138,8 +138,10 @@ def test_restart_with_the_same_seed_replays_the_same_run(ros, sim_log_dir, bag_d
     runs = []
     for label in ("replay_a", "replay_b"):
         bag = bag_dir / f"{label}.mcap"
+        # the same frame names in both (by default each namespace prefixes its own)
         runs.append((label, bag, FaultProcess(ros, dict(seed=SEED, control="heuristic", real_time_factor=0.0,
-                                                        num_envs=2, record_path=str(bag)), sim_log_dir, label)))
+                                                        num_envs=2, record_path=str(bag), frame_prefix=""),
+                                              sim_log_dir, label)))
     try:
         for label, _, process in runs:
             process.wait_ready()

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 import signal
 
 import pytest
@@ -9,6 +10,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
 
 from test.ros.fault_tools import FaultProcess, assert_whole_steps, read_finished
+from test.ros.test_sim_node_foxglove import _free_port, _wait_listening
 from test.ros.sim_node_helpers import DT_NS
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -20,10 +22,21 @@ def _moved(start: PoseStamped, end: PoseStamped) -> float:
 
 def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_log_dir, tmp_path):
     bag = tmp_path / "follower.mcap"
-    owner = FaultProcess(ros, {"seed": 1}, sim_log_dir, "swarm_a")
+    port = _free_port()
+    owner = FaultProcess(ros, {"seed": 1, "foxglove_port": port, "record_path": str(tmp_path / "owner.mcap")},
+                         sim_log_dir, "swarm_a")
     follower = None
     try:
         owner.wait_ready(timeout=60.0)
+        _wait_listening(port)
+        # a third node asking for the owner's Foxglove port or bag path is refused up front, naming the owner
+        for clash, what in (({"foxglove_port": port}, "the port is in use by pid"),
+                            ({"record_path": str(tmp_path / "owner.mcap"), "record_overwrite": True},
+                             "is being recorded by pid")):
+            refused = FaultProcess(ros, clash, sim_log_dir, "swarm_c")
+            assert refused.wait(60) == 2, refused.describe()
+            message = refused.stderr()
+            assert f"{what} {owner.proc.pid} (" in message and "__ns:=/swarm_a" in message, message[-2000:]
         follower = FaultProcess(ros, {"seed": 2, "publish_clock": False, "record_path": str(bag)}, sim_log_dir,
                                 "swarm_b")
         follower.wait_ready(timeout=60.0)
@@ -73,3 +86,16 @@ def test_frame_prefix_values(value, refused):
     assert (message is not None) == refused
     if refused:
         assert repr(value) in message and "'robot_a/'" in message
+
+
+def test_the_listener_of_a_port_is_named():
+    import socket
+
+    from vmas_ros.ros.port_owner import listener_of
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        assert listener_of(port).startswith(f"pid {os.getpid()} (")
+    assert listener_of(port) is None

@@ -86,6 +86,7 @@ from vmas_ros.record._io import (  # noqa: F401 - re-exported
     serialize_tf_message,
     split_path,
 )
+from vmas_ros.record.claim import PathClaim, RecordingInUse  # noqa: F401 - re-exported
 from vmas_ros.record.rosbag2 import BagFolder, RecordingExists, bag_layout  # noqa: F401 - re-exported
 from vmas_ros.record.schemas import message_definition, normalize_type
 
@@ -199,7 +200,12 @@ class McapRecorder:
             raise ValueError("compression='zstd' needs the zstandard package (pip install zstandard)")
         self._layout = bag_layout(path)
         self._path = self._layout.bag
-        self._layout.prepare(overwrite)
+        self._claim = PathClaim(self._layout.path)  # before prepare: overwrite must not hit a live bag
+        try:
+            self._layout.prepare(overwrite)
+        except BaseException:
+            self._claim.release()
+            raise
         self._on_failure = on_failure
         self._failure: Optional[RecordingFailed] = None
         self._finished: List[Tuple[Path, int]] = []  # files closed complete, with their message counts
@@ -223,7 +229,11 @@ class McapRecorder:
         # a signal between creating the file and registering the atexit close would leave a
         # header-only file nobody finishes (seen with SIGINT during sim_node's start-up)
         with self._deferred_signals():
-            self._open_next()
+            try:
+                self._open_next()
+            except BaseException:
+                self._claim.release()
+                raise
             atexit.register(self.close)
 
     # ------------------------------------------------------------- properties
@@ -467,6 +477,8 @@ class McapRecorder:
                 self._layout.finish(self._paths)
             except OSError as error:
                 self._fail(error)
+            finally:
+                self._claim.release()
 
     def __enter__(self) -> "McapRecorder":
         return self

@@ -260,7 +260,12 @@ class SimNode(StepLoop, Node):
                 agent_names=self.agent_names if self.per_agent else (), on_twist=self._on_foxglove_twist,
             )
         except (RuntimeError, OSError) as error:
-            raise ConfigError(f"cannot start the Foxglove server on {p.foxglove_host}:{p.foxglove_port}: {error}") from None
+            from vmas_ros.ros.port_owner import listener_of
+
+            holder = listener_of(p.foxglove_port)
+            used = f"; the port is in use by {holder}: give this node a foxglove_port of its own" if holder else ""
+            raise ConfigError(f"cannot start the Foxglove server on {p.foxglove_host}:{p.foxglove_port}: "
+                              f"{error}{used}") from None
         if p.foxglove_host not in ("127.0.0.1", "localhost", "::1"):
             self.get_logger().warning(
                 f"Foxglove server listens on {p.foxglove_host}: anyone who reaches that address can watch "
@@ -275,7 +280,7 @@ class SimNode(StepLoop, Node):
         self._recording_failure = None
         if not p.record_path:
             return None
-        from vmas_ros.record import McapRecorder, RecordingExists
+        from vmas_ros.record import McapRecorder, RecordingExists, RecordingInUse
 
         try:
             recorder = McapRecorder(
@@ -283,6 +288,9 @@ class SimNode(StepLoop, Node):
                 max_bytes=int(p.record_max_mb * 1e6) or None, max_duration_s=p.record_max_duration_s or None,
                 on_failure=self._on_recording_failure,
             )
+        except RecordingInUse as error:
+            raise ConfigError(f"record_path: {error.path} is being recorded by {error.holder}; give this node "
+                              f"a record_path of its own") from None
         except RecordingExists as error:
             raise ConfigError(f"record_path: {error.path} exists ({error.what}); choose another path or set "
                               f"record_overwrite:=true to replace it") from None
