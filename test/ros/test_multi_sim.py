@@ -99,3 +99,24 @@ def test_the_listener_of_a_port_is_named():
         port = server.getsockname()[1]
         assert listener_of(port).startswith(f"pid {os.getpid()} (")
     assert listener_of(port) is None
+
+
+def test_multi_sim_launch_file_starts_namespaced_nodes_with_known_parameters():
+    """launch_scripts/multi_sim.launch.py, checked without `launch` (no PyPI wheels): its shape and parameters."""
+    import ast
+    from pathlib import Path
+
+    from vmas_ros.ros.params import SimParams
+
+    tree = ast.parse((Path(__file__).resolve().parents[2] / "launch_scripts" / "multi_sim.launch.py").read_text())
+    assert "generate_launch_description" in {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "Node"]
+    assert len(calls) == 1
+    keywords = {k.arg: k.value for k in calls[0].keywords}
+    assert ast.literal_eval(keywords["executable"]) == "sim_node" and "namespace" in keywords
+    keys = {k.value for node in ast.walk(tree) if isinstance(node, ast.Dict) for k in node.keys
+            if isinstance(k, ast.Constant)}
+    assert {"scenario", "seed", "publish_clock", "foxglove_port"} == keys and keys <= set(SimParams.names())
+    arguments = {ast.literal_eval(node.args[0]) for node in ast.walk(tree)
+                 if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "DeclareLaunchArgument"}
+    assert arguments == {"count", "prefix", "scenario", "config", "seed", "foxglove_port"}
