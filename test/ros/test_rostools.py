@@ -140,7 +140,7 @@ def test_tools_reach_a_namespaced_node(ros, sim_log_dir):
         assert 0.24 <= math.dist(start, _position(poses)) <= 0.36
         poses.destroy()
         echo = vmas_ros_cli("echo", "agent_0/odom", "--namespace", "/swarm1", "--count", "1")
-        assert echo.returncode == 0 and "child_frame_id: 'agent_0/base_link'" in echo.stdout, echo
+        assert echo.returncode == 0 and "child_frame_id: 'swarm1/agent_0/base_link'" in echo.stdout, echo
         missing = vmas_ros_cli("drive", "agent_9", "--namespace", "/swarm1", "--vx", "0.1", "--seconds", "0.1")
         assert missing.returncode == 1 and "nothing subscribes to /swarm1/agent_9/cmd_vel" in missing.stderr, missing
     finally:
