@@ -108,9 +108,11 @@ def run_train_command(args: argparse.Namespace) -> int:
         return 2
     if state is not None:
         print(f"resuming {config.out} at iteration {trainer.iteration} ({trainer.frames} frames)")
+    from vmas_ros.train.ray_collection import CollectorLost
+
     try:
         summary = trainer.run()
-    except (KeyboardInterrupt, RuntimeError) as error:
+    except (KeyboardInterrupt, CollectorLost) as error:
         return _stopped_early(trainer, error)
     last = trainer.history[-1] if trainer.history else {}
     print(f"trained {config.algorithm} on {config.scenario}: {summary['iterations']} iterations, "
@@ -125,11 +127,6 @@ def run_train_command(args: argparse.Namespace) -> int:
 
 def _stopped_early(trainer, error: BaseException) -> int:
     """Save what the completed iterations learnt and say how to continue; exit 130 on Ctrl-C, else 1."""
-    from vmas_ros.train.ray_collection import CollectorLost
-
-    if not isinstance(error, (KeyboardInterrupt, CollectorLost)):
-        trainer.close()
-        raise error
     try:
         trainer.save()
     finally:

@@ -13,6 +13,8 @@ and count finished episodes' returns with the same :class:`EpisodeReturns`.
 """
 from __future__ import annotations
 
+import abc
+import time
 from typing import Any, Dict, List, Tuple
 
 import torch
@@ -48,16 +50,16 @@ class EpisodeReturns:
         return episodes[~torch.isnan(episodes)]
 
 
-class Collection:
+class Collection(abc.ABC):
     """What the trainer asks of a collection (see the module docstring)."""
 
-    #: one entry per process that steps envs: where it runs and how fast it went
+    @abc.abstractmethod
     def describe(self) -> Dict[str, Any]:
-        raise NotImplementedError
+        """Where the envs run and how fast: ``{"ray_address", "collectors": [one entry per process]}``."""
 
+    @abc.abstractmethod
     def collect(self) -> Tuple[TensorDictBase, torch.Tensor]:
         """One batch ``[num_envs, steps_per_batch]`` and the returns of the episodes that ended in it."""
-        raise NotImplementedError
 
     def policy_updated(self) -> None:
         """The learner changed the policy's weights: the next batch must use them."""
@@ -83,8 +85,6 @@ class LocalCollection(Collection):
 
     @torch.no_grad()
     def collect(self) -> Tuple[TensorDictBase, torch.Tensor]:
-        import time
-
         start = time.perf_counter()
         steps, td = [], self._td
         with set_exploration_type(ExplorationType.RANDOM):

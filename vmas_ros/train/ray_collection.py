@@ -87,9 +87,9 @@ def _check_room(collectors: int, cpus: int, gpus: bool) -> None:
         if room or never or time.monotonic() > deadline:
             break
         time.sleep(0.2)
-    for resource, each in (("CPU", cpus),) + ((("GPU", 1),) if gpus else ()):
-        needed = collectors * each
+    for resource, needed in wanted.items():
         if free.get(resource, 0) < needed:
+            each = needed // collectors
             raise ValueError(f"{collectors} collectors x {each} {resource} need {needed} {resource}s; the Ray "
                              f"cluster has {free.get(resource, 0):g} free of {total.get(resource, 0):g}: "
                              f"use fewer collectors (--collectors) or CPUs each (--collector-cpus)")
