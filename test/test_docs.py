@@ -14,6 +14,8 @@
   section in docs/cli.md, and each of its options is documented somewhere.
 - The parameter tables of docs/node.md and docs/policy_node.md list exactly the
   fields of ``SimParams`` and ``PolicyNodeParams``, with their defaults.
+- No Python file of the package or its tests is over 500 lines: a longer one
+  holds more than one concern and is split by concern.
 """
 from __future__ import annotations
 
@@ -211,6 +213,17 @@ def test_code_comments_and_docstrings_carry_no_measurements():
                       "with their command):\n" + "\n".join(hits))
     stale = set(MEASUREMENT_ALLOWED) - allowed_seen
     assert not stale, f"MEASUREMENT_ALLOWED entries that no longer match anything: {sorted(stale)}"
+
+
+MAX_FILE_LINES = 500
+
+
+def test_no_python_file_is_over_500_lines():
+    sources = [*sorted((ROOT / "vmas_ros").rglob("*.py")), *sorted((ROOT / "test").rglob("*.py"))]
+    assert len(sources) > 100, "the sources were not found"
+    long = [f"{source.relative_to(ROOT).as_posix()}: {count} lines" for source in sources
+            if (count := len(source.read_text(encoding="utf-8").splitlines())) > MAX_FILE_LINES]
+    assert not long, f"split these by concern (at most {MAX_FILE_LINES} lines each):\n" + "\n".join(long)
 
 
 def test_the_checks_catch_what_they_look_for():

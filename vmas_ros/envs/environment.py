@@ -32,14 +32,9 @@ __all__ = ["Environment"]
 FEW_ACTION_ELEMENTS = 4096
 
 
-def _is_one(u_multiplier) -> bool:
-    values = u_multiplier if isinstance(u_multiplier, (list, tuple)) else [u_multiplier]
-    return all(float(v) == 1 for v in values)
-
-
-def _has_noise(u_noise) -> bool:
-    values = u_noise if isinstance(u_noise, (list, tuple)) else [u_noise]
-    return any(float(v) != 0 for v in values)
+def _per_component(value) -> list:
+    """An action setting given as one number or one per action component, as a list."""
+    return list(value) if isinstance(value, (list, tuple)) else [value]
 
 
 class Environment:
@@ -231,7 +226,8 @@ class Environment:
             plans = self._plans = [
                 (self.get_agent_action_size(agent), agent.action_size,
                  self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0,
-                 _is_one(agent.action.u_multiplier), _has_noise(agent.action.u_noise))
+                 all(float(v) == 1 for v in _per_component(agent.action.u_multiplier)),
+                 any(float(v) != 0 for v in _per_component(agent.action.u_noise)))
                 for agent in self.agents
             ]
         return plans
