@@ -7,6 +7,8 @@ step and by ``stacked_state``, and adding entities or moving devices loses nothi
 """
 from __future__ import annotations
 
+import re
+
 import pytest
 import torch
 
@@ -139,6 +141,17 @@ def test_an_entity_outside_a_world_refuses_state_but_reads_none():
     assert agent.state.pos is None
     with pytest.raises(RuntimeError, match="add loose to a world"):
         agent.state.pos = torch.zeros(1, 2)
+
+
+@pytest.mark.parametrize("field, width", [("pos", 2), ("vel", 2), ("rot", 1), ("force", 2), ("torque", 1)])
+def test_a_state_field_of_the_wrong_shape_is_refused_naming_it(field, width):
+    agent = _world("cpu").agents[0]
+    before = getattr(agent.state, field).clone()
+    for bad in (torch.zeros(4, width + 1), torch.zeros(4)):
+        message = f"a0.{field} must have shape [4, {width}], got {tuple(bad.shape)}"
+        with pytest.raises(ValueError, match=re.escape(message)):
+            setattr(agent.state, field, bad)
+    torch.testing.assert_close(getattr(agent.state, field), before)
 
 
 def test_env_steps_equal_with_and_without_reading_entity_state_between_steps():

@@ -63,6 +63,16 @@ class _Batched:
         # the common case (already there) skips a dispatcher call: setters run several times per step
         return value if value.device == self._device else value.to(self._device)
 
+    def _check_rows(self, name: str, value: Tensor, width: int) -> Tensor:
+        """``_check_tensor`` for a ``[batch, width]`` field of this state."""
+        value = self._check_tensor(self._owner_name, name, value)
+        if value.dim() != 2 or value.shape[1] != width:
+            raise ValueError(
+                f"{self._owner_name}.{name} must have shape [{self._batch_dim}, {width}], "
+                f"got {tuple(value.shape)}"
+            )
+        return value
+
 
 def _action_tensor(name: str, width: int, doc: str):
     """A validated [batch, width] action field of an agent state (kept in the world's action block)."""
@@ -72,27 +82,21 @@ def _action_tensor(name: str, width: int, doc: str):
         return self.__dict__[attr]
 
     def fset(self, value: Tensor) -> None:
-        value = self._check_tensor(self._owner_name, name, value)
-        if value.dim() != 2 or value.shape[1] != width:
-            raise ValueError(
-                f"{self._owner_name}.{name} must have shape [{self._batch_dim}, {width}], "
-                f"got {tuple(value.shape)}"
-            )
+        value = self._check_rows(name, value, width)
         self._set_action(name, value)
 
     return property(fget, fset, doc=doc)
 
 
 def _stored_tensor(name: str, width: int, doc: str):
-    """A [batch, width] field the world state holds after a step (validated like _state_tensor).
+    """A [batch, width] field the world state holds after a step (validated by _check_rows).
 
     The entity holds a tensor of its own only when it was set since the world
     state last adopted a state (its generation number equals the world
     state's); otherwise the getter returns the world state's view, and keeps
     no reference to it: an entity holding last step's view would keep last
-    step's stacks alive (a few MB at 30,000 envs). The setter keeps the new
-    tensor on the entity and tells the world state that the adopted state is
-    no longer the truth.
+    step's stacks alive. The setter keeps the new tensor on the entity and
+    tells the world state that the adopted state is no longer the truth.
     """
     attr, gen_attr = "_" + name, "_" + name + "_gen"
 
@@ -104,12 +108,7 @@ def _stored_tensor(name: str, width: int, doc: str):
         return world_state.view(name, self._slot)
 
     def fset(self, value: Tensor) -> None:
-        value = self._check_tensor(self._owner_name, name, value)
-        if value.dim() != 2 or value.shape[1] != width:
-            raise ValueError(
-                f"{self._owner_name}.{name} must have shape [{self._batch_dim}, {width}], "
-                f"got {tuple(value.shape)}"
-            )
+        value = self._check_rows(name, value, width)
         self._own(name, value)
 
     return property(fget, fset, doc=doc)
