@@ -13,18 +13,11 @@
 Needs the ``record`` extra (``mcap``, ``mcap-ros2-support``) and rclpy for
 serialising messages.
 """
-from vmas_ros.record.mcap_recorder import (
-    DEFAULT_COMPRESSION,
-    TF_MESSAGE_TYPE,
-    McapRecorder,
-    RecordingExists,
-    RecordingFailed,
-    RecordingInUse,
-    qos_profile_yaml,
-    serialize_tf_message,
-    split_path,
-)
+from vmas_ros.record._io import TF_MESSAGE_TYPE, qos_profile_yaml, serialize_tf_message, split_path
+from vmas_ros.record.claim import RecordingInUse
+from vmas_ros.record.mcap_recorder import DEFAULT_COMPRESSION, McapRecorder, RecordingFailed
 from vmas_ros.record.recover import recover
+from vmas_ros.record.rosbag2 import RecordingExists
 from vmas_ros.record.schemas import message_definition
 
 __all__ = [

@@ -66,40 +66,22 @@ from typing import Callable, Dict, Iterable, Iterator, List, Optional, Tuple, Un
 
 from mcap.writer import CompressionType
 
-from vmas_ros.record._io import (  # noqa: F401 - re-exported
-    _CDR_LE,
-    _CHUNK_OVERHEAD,
+from vmas_ros.record._io import (
     _DEFERRED,
     _INDEX_ENTRY,
     _INDEX_OVERHEAD,
-    _INFINITE,
     _MAIN_THREAD_ID,
     _MESSAGE_RECORD_OVERHEAD,
     _QOS,
-    _TRANSFORM_BYTES,
-    TF_MESSAGE_TYPE,
     _absolute,
     _OpenFile,
-    _pad,
-    _UnbufferedFile,
     qos_profile_yaml,
-    serialize_tf_message,
-    split_path,
 )
-from vmas_ros.record.claim import PathClaim, RecordingInUse  # noqa: F401 - re-exported
-from vmas_ros.record.rosbag2 import BagFolder, RecordingExists, bag_layout  # noqa: F401 - re-exported
+from vmas_ros.record.claim import PathClaim
+from vmas_ros.record.rosbag2 import BagFolder, bag_layout
 from vmas_ros.record.schemas import message_definition, normalize_type
 
-__all__ = [
-    "DEFAULT_COMPRESSION",
-    "McapRecorder",
-    "RecordingExists",
-    "RecordingFailed",
-    "TF_MESSAGE_TYPE",
-    "qos_profile_yaml",
-    "serialize_tf_message",
-    "split_path",
-]
+__all__ = ["DEFAULT_COMPRESSION", "McapRecorder", "RecordingFailed"]
 
 try:  # what mcap needs to write (and read) zstd chunks
     import zstandard  # noqa: F401
