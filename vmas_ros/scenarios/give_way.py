@@ -49,7 +49,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import heuristic_kwargs, read_kwargs, selected_rows
+from vmas_ros.scenarios.common import check_int, check_number, configure, heuristic_kwargs, selected_rows
 from vmas_ros.simulator import geometry as geo
 from vmas_ros.simulator.controllers.velocity_controller import VelocityController
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
@@ -134,21 +134,20 @@ def track_velocity(agent: Agent, command: Tensor, max_speed: float, min_input_no
     controller.process_force()
 
 
+def validate(config: dict) -> None:
+    """Raise ValueError for a kwarg value the task cannot be built with."""
+    for name in ("v_range", "a_range"):
+        check_number("give_way", name, config[name], strict=True)
+    for name in ("obs_noise", "linear_friction", "min_input_norm"):
+        check_number("give_way", name, config[name])
+    check_int("give_way", "dt_delay", config["dt_delay"], 0, "steps")
+
+
 class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        for name in ("v_range", "a_range"):
-            if not config[name] > 0:
-                raise ValueError(f"give_way: {name} must be > 0, got {config[name]!r}")
-        for name in ("obs_noise", "linear_friction", "min_input_norm"):
-            if not config[name] >= 0:
-                raise ValueError(f"give_way: {name} must be >= 0, got {config[name]!r}")
-        if not isinstance(config["dt_delay"], int) or config["dt_delay"] < 0:
-            raise ValueError(f"give_way: dt_delay must be an int >= 0 (steps), got {config['dt_delay']!r}")
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         self.viewer_size = (1600, 700)
         self.f_range = self.a_range + self.linear_friction
         self.u_range = self.v_range if self.use_velocity_controller else self.f_range

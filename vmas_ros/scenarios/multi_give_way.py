@@ -47,7 +47,7 @@ import math
 import torch
 from torch import Tensor
 
-from vmas_ros.scenarios.common import heuristic_kwargs, range_links, read_kwargs
+from vmas_ros.scenarios.common import check_number, configure, heuristic_kwargs, range_links
 from vmas_ros.scenarios.give_way import PID_PARAMS, VelocityController, Wall, track_velocity
 from vmas_ros.simulator.core import Agent, Box, Landmark, Line, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
@@ -99,21 +99,21 @@ def map_layout() -> list[Wall]:
     return walls
 
 
+def validate(config: dict) -> None:
+    """Raise ValueError for a kwarg value the task cannot be built with."""
+    for name in ("u_range", "a_range"):
+        check_number("multi_give_way", name, config[name], strict=True)
+    for name in ("obs_noise", "linear_friction", "min_input_norm", "comms_range"):
+        check_number("multi_give_way", name, config[name])
+    if config["n_agents"] != N_AGENTS:
+        raise ValueError(f"multi_give_way: n_agents must be 4 (one per arm), got {config['n_agents']!r}")
+
+
 class Scenario(BaseScenario):
     supports_batched_reset = True
 
     def make_world(self, batch_dim: int, device, **kwargs) -> World:
-        config = read_kwargs(kwargs, DEFAULTS)
-        for name in ("u_range", "a_range"):
-            if not config[name] > 0:
-                raise ValueError(f"multi_give_way: {name} must be > 0, got {config[name]!r}")
-        for name in ("obs_noise", "linear_friction", "min_input_norm", "comms_range"):
-            if not config[name] >= 0:
-                raise ValueError(f"multi_give_way: {name} must be >= 0, got {config[name]!r}")
-        if config["n_agents"] != N_AGENTS:
-            raise ValueError(f"multi_give_way: n_agents must be 4 (one per arm), got {config['n_agents']!r}")
-        for name, value in config.items():
-            setattr(self, name, value)
+        configure(self, kwargs, DEFAULTS, validate)
         self.viewer_zoom = 1.7
         self.f_range = self.a_range + self.linear_friction
 
