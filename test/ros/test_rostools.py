@@ -1,4 +1,4 @@
-"""The ROS tools (``vmas-ros echo``, ``drive``) against a real sim_node, each run as a fresh process.
+"""The ROS tools against a real sim_node: as fresh processes, as a user runs them, and in-process.
 
 A user runs ``vmas-ros drive`` in a second terminal while sim_node runs in
 real time: the command must wait for discovery, drive for the time asked,
@@ -23,7 +23,9 @@ from test.record.bag_helpers import STEPS, TOPICS, _read_rosbags, _write_sample
 from test.ros.conftest import NODE, REPO, sim_env, stamp_ns
 from vmas_ros.rostools import param
 from vmas_ros.rostools.bag import summarize_bag
+from vmas_ros.rostools.call import call
 from vmas_ros.rostools.graph import ToolError, resolve_name
+from vmas_ros.rostools.topics import list_topics
 
 pytestmark = [pytest.mark.ros]
 
@@ -155,16 +157,15 @@ def test_echo_reads_a_relative_name(realtime):
 
 # ---------------------------------------------------------- graph tools
 def test_topics_and_services_are_listed_with_their_types(realtime):
-    topics = vmas_ros_cli("topics", "--wait", "5")  # margin over discovery's ~2 s worst case here
-    assert topics.returncode == 0, topics.stderr
-    assert "/agent_0/pose [geometry_msgs/msg/PoseStamped]\n" in topics.stdout
-    assert "/agent_0/cmd_vel [geometry_msgs/msg/Twist]\n" in topics.stdout
-    services = vmas_ros_cli("topics", "--services", "--no-types", "--wait", "5")
-    assert services.returncode == 0, services.stderr
-    assert {"/sim_node/reset", "/sim_node/pause", "/sim_node/step"} <= set(services.stdout.split())
+    lines = []
+    list_topics(wait=5.0, out=lines.append)  # margin over discovery's periodic announcements
+    assert {"/agent_0/pose [geometry_msgs/msg/PoseStamped]", "/agent_0/cmd_vel [geometry_msgs/msg/Twist]"} <= set(lines)
+    services = list_topics(wait=0.5, services=True, show_types=False, out=lambda line: None)  # the same node: known
+    assert {"/sim_node/reset", "/sim_node/pause", "/sim_node/step"} <= set(services)
 
 
 def test_call_pauses_steps_and_resumes_the_node(ros, realtime):
+    """The first call is a fresh process, as a user runs it; the others reuse this process's tool node."""
     clock = ros.collect(Clock, "/clock")
     paused = vmas_ros_cli("call", "sim_node/pause", "true")
     assert paused.returncode == 0 and "success=True" in paused.stdout, paused.stderr
@@ -172,16 +173,16 @@ def test_call_pauses_steps_and_resumes_the_node(ros, realtime):
     before = clock.latest.clock
     ros.spin_for(0.5)
     assert clock.latest.clock == before, "a paused node's clock stands still"
-    stepped = vmas_ros_cli("call", "/sim_node/step")
-    assert stepped.returncode == 0 and "success=True" in stepped.stdout, stepped.stderr
+    lines = []
+    assert call("/sim_node/step", out=lines.append) and "success=True" in lines[-1]
     clock.wait_until(lambda m: stamp_ns(m.clock) > stamp_ns(before), timeout=5, what="the step's clock")
-    resumed = vmas_ros_cli("call", "/sim_node/pause", "false")
-    assert resumed.returncode == 0, resumed.stderr
+    assert call("/sim_node/pause", "false", out=lines.append)
     clock.destroy()
-    bad = vmas_ros_cli("call", "/sim_node/pause", "maybe")
-    assert bad.returncode == 2 and "SetBool service: give true or false, got 'maybe'" in bad.stderr
-    missing = vmas_ros_cli("call", "/sim_node/rewind", "--timeout", "1")
-    assert missing.returncode == 1 and "no service /sim_node/rewind appeared within 1 s" in missing.stderr
+    with pytest.raises(ToolError, match="SetBool service: give true or false, got 'maybe'") as bad:
+        call("/sim_node/pause", "maybe", out=lines.append)
+    with pytest.raises(ToolError, match="no service /sim_node/rewind appeared within 1 s") as missing:
+        call("/sim_node/rewind", timeout=1.0, out=lines.append)
+    assert (bad.value.exit_code, missing.value.exit_code) == (2, 1)
 
 
 def test_param_lists_gets_describes_and_sets_env_index(ros, realtime):

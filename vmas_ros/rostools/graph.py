@@ -1,4 +1,4 @@
-"""What the ROS tools share: a short-lived node, names resolved as ``ros2`` does, waiting.
+"""What the ROS tools share: a node per tool kept for the process, names resolved as ``ros2`` does, waiting.
 
 Names follow ROS 2's rules: ``/a/b`` is absolute; ``a/b`` is relative and
 resolves against the tool's namespace (``--namespace``, default ``/``), so
@@ -7,10 +7,12 @@ resolves against the tool's namespace (``--namespace``, default ``/``), so
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import re
+import threading
 import time
-from typing import Callable, Iterator, Optional, TypeVar
+from typing import Callable, Dict, Iterator, Optional, Set, TypeVar
 
 __all__ = ["ToolError", "ToolNode", "call_service", "resolve_name", "service_type", "tool_node"]
 
@@ -64,6 +66,22 @@ class ToolNode:
                                       start_parameter_services=False, enable_rosout=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.lock = threading.Lock()  # one tool call at a time spins this node
+
+    def entities(self) -> Set[object]:
+        """The node's publishers, subscriptions and service clients now."""
+        node = self.node
+        return {*node.publishers, *node.subscriptions, *node.clients}
+
+    def destroy_created_since(self, before: Set[object]) -> None:
+        """Destroy the publishers, subscriptions and clients not in ``before``."""
+        node = self.node
+        for publisher in [p for p in node.publishers if p not in before]:
+            node.destroy_publisher(publisher)
+        for subscription in [s for s in node.subscriptions if s not in before]:
+            node.destroy_subscription(subscription)
+        for client in [c for c in node.clients if c not in before]:
+            node.destroy_client(client)
 
     def spin_once(self, timeout: float) -> None:
         """Run at most one ready callback, waiting up to ``timeout`` seconds for one."""
@@ -91,14 +109,40 @@ class ToolNode:
         self.context.try_shutdown()
 
 
+_SHARED: Dict[str, ToolNode] = {}
+_SHARED_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
-def tool_node(name: str, namespace: str = "/") -> Iterator[ToolNode]:
-    """A :class:`ToolNode` named ``name``, shut down on the way out whatever happens."""
-    tool = ToolNode(name, namespace)
-    try:
-        yield tool
-    finally:
-        tool.close()
+def tool_node(name: str) -> Iterator[ToolNode]:
+    """This process's :class:`ToolNode` named ``name``, for the length of one tool call.
+
+    The node outlives the call and serves the process's next call of the same
+    tool: peers often see a new DDS participant only at their next periodic
+    announcement, seconds later, so a test or a notebook that runs tools again
+    and again would wait that long every time. What the call created
+    (publishers, subscriptions, service clients) is destroyed on the way out,
+    whatever happens, so no call sees another's leftovers. Calls from several
+    threads take turns.
+    """
+    with _SHARED_LOCK:
+        tool = _SHARED.get(name)
+        if tool is None or not tool.context.ok():
+            tool = _SHARED[name] = ToolNode(name)
+    with tool.lock:
+        before = tool.entities()
+        try:
+            yield tool
+        finally:
+            tool.destroy_created_since(before)
+
+
+@atexit.register
+def _close_shared() -> None:
+    with _SHARED_LOCK:
+        for tool in _SHARED.values():
+            tool.close()
+        _SHARED.clear()
 
 
 def call_service(tool: ToolNode, srv_type, name: str, request, timeout: float):
