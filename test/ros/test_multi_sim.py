@@ -1,4 +1,4 @@
-"""Two sim_nodes in one ROS graph: namespaces keep topics and commands apart, and one node owns /clock."""
+"""Two sim_nodes in one ROS graph: namespaces keep topics, commands and tools apart, and one node owns /clock."""
 from __future__ import annotations
 
 import math
@@ -6,12 +6,14 @@ import os
 import signal
 
 import pytest
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 
 from test.ros.fault_tools import FaultProcess, assert_whole_steps, read_finished
 from test.ros.test_sim_node_foxglove import _free_port, _wait_listening
 from test.ros.sim_node_helpers import DT_NS
+from test.ros.test_rostools import vmas_ros_cli
+from vmas_ros.rostools import param
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -54,13 +56,20 @@ def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_l
         assert ros.node.count_publishers("/clock") == 1
         topics = ros.topics()
         assert {"/swarm_a/agent_0/pose", "/swarm_b/agent_0/pose", "/swarm_b/agent_0/cmd_vel"} <= set(topics)
+        # the pip users' ROS tools tell the two apart: absolute names and --namespace
         before = {label: collected.latest for label, collected in poses.items()}
-        command = Twist()
-        command.linear.x = 0.5
-        ros.publish_for(Twist, "/swarm_a/agent_0/cmd_vel", command, seconds=2.0, period=0.1)
+        done = vmas_ros_cli("drive", "/swarm_a/agent_0", "--vx", "0.5", "--seconds", "1")
+        assert done.returncode == 0 and "Twists to /swarm_a/agent_0/cmd_vel (1 subscriber)" in done.stdout, done
+        ros.spin_for(0.5)
         after = {label: collected.latest for label, collected in poses.items()}
         assert _moved(before["swarm_a"], after["swarm_a"]) > 0.02, "the commanded node's agent_0 did not move"
         assert _moved(before["swarm_b"], after["swarm_b"]) < 1e-6, "a command for swarm_a moved swarm_b's agent"
+        echo = vmas_ros_cli("echo", "agent_0/odom", "--namespace", "/swarm_b", "--count", "1")
+        assert echo.returncode == 0 and "child_frame_id: 'swarm_b/agent_0/base_link'" in echo.stdout, echo
+        assert [param.get_parameter(f"/{label}/sim_node", "publish_clock", out=print)
+                for label in ("swarm_a", "swarm_b")] == [True, False]
+        missing = vmas_ros_cli("drive", "agent_9", "--namespace", "/swarm_b", "--vx", "0.1", "--seconds", "0.1")
+        assert missing.returncode == 1 and "nothing subscribes to /swarm_b/agent_9/cmd_vel" in missing.stderr, missing
         assert follower.stop(signal.SIGINT, timeout=30.0) == 0, follower.describe()
         assert owner.stop(signal.SIGINT, timeout=30.0) == 0, owner.describe()
     finally:

@@ -78,12 +78,12 @@ def _position(poses) -> tuple:
     return pose.x, pose.y
 
 
-def test_drive_moves_the_agent_as_asked_in_three_fresh_processes(ros, realtime):
+def test_drive_moves_the_agent_as_asked_in_five_fresh_processes(ros, realtime):
     """0.3 m/s for 2 s is 0.6 m: within 20% every time, each drive a process of its own (a drive that
     published before discovery delivered anything from 0 to all of its Twists)."""
     poses = ros.collect(PoseStamped, "/agent_0/pose")
     distances = []
-    for _ in range(3):
+    for _ in range(5):
         ros.call(Trigger, f"{NODE}/reset")
         fresh(ros, poses)
         start = _position(poses)
@@ -124,29 +124,6 @@ def test_drive_without_a_node_says_so():
 def test_drive_refuses_bad_arguments(args, message):
     done = vmas_ros_cli("drive", *args)
     assert done.returncode == 2 and message in done.stderr, done.stderr
-
-
-def test_tools_reach_a_namespaced_node(ros, sim_log_dir):
-    """A node started with ``-r __ns:=/swarm1``: absolute names and ``--namespace`` both reach it."""
-    from test.ros.fault_tools import FaultProcess
-
-    sim = FaultProcess(ros, {"scenario_kwargs": {"n_agents": 1}, "control": "zero"}, sim_log_dir, "swarm1")
-    try:
-        sim.wait_ready()
-        poses = ros.collect(PoseStamped, "/swarm1/agent_0/pose")
-        fresh(ros, poses)
-        start = _position(poses)
-        done = vmas_ros_cli("drive", "/swarm1/agent_0", "--vx", "0.3", "--seconds", "1")
-        assert done.returncode == 0 and "Twists to /swarm1/agent_0/cmd_vel (1 subscriber)" in done.stdout, done
-        ros.spin_for(0.5)
-        assert 0.24 <= math.dist(start, _position(poses)) <= 0.36
-        poses.destroy()
-        echo = vmas_ros_cli("echo", "agent_0/odom", "--namespace", "/swarm1", "--count", "1")
-        assert echo.returncode == 0 and "child_frame_id: 'swarm1/agent_0/base_link'" in echo.stdout, echo
-        missing = vmas_ros_cli("drive", "agent_9", "--namespace", "/swarm1", "--vx", "0.1", "--seconds", "0.1")
-        assert missing.returncode == 1 and "nothing subscribes to /swarm1/agent_9/cmd_vel" in missing.stderr, missing
-    finally:
-        assert sim.stop() == 0, sim.describe()
 
 
 def test_echo_reads_a_relative_name(realtime):
