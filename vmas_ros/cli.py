@@ -243,6 +243,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--record", default=None, help="record a bag: NAME.mcap (one MCAP file) or NAME (a rosbag2 bag folder)")
     sim.add_argument("-p", "--param", action="append", help="extra node parameter name:=value (repeatable)")
     sim.set_defaults(func=cmd_sim)
+    from vmas_ros.viz import foxglove_layout
+
+    _add_delegated(sub, "foxglove-layout", "write a Foxglove layout for a sim_node: its frame prefix and agents",
+                   foxglove_layout.add_arguments, foxglove_layout.run)
     from vmas_ros.rostools.cli import add_rostool_parsers
 
     add_rostool_parsers(sub)  # vmas-ros echo, drive, topics, call, param, bag

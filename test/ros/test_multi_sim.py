@@ -77,6 +77,8 @@ def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_l
         if follower is not None:
             follower.kill()
     assert "publish_clock is false: /clock comes from another node" in follower.stderr()
+    # the Foxglove owner says how to make a layout for its prefixed frames
+    assert "make it with: vmas-ros foxglove-layout --frame-prefix swarm_a/ --agents" in owner.stderr()
     # the follower's bag keeps its own steps on /clock, though it never published one
     recorded = read_finished(bag)
     assert recorded.count("/clock") > 0

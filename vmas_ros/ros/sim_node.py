@@ -271,7 +271,12 @@ class SimNode(StepLoop, Node):
                 f"Foxglove server listens on {p.foxglove_host}: anyone who reaches that address can watch "
                 f"and drive the simulation"
             )
-        self.get_logger().info(f"Foxglove: open {bridge.url} in Foxglove (layout: config/foxglove_layout.json)")
+        from vmas_ros.viz.foxglove_layout import layout_command
+
+        agents = self.agent_names if self.per_agent else self.agent_names[:1]
+        command = layout_command(self.frame_prefix, p.frame_id, agents)
+        self.get_logger().info(f"Foxglove: open {bridge.url} in Foxglove (layout: "
+                               f"{'config/foxglove_layout.json' if command is None else 'make it with: ' + command})")
         return bridge
 
     def _start_recorder(self):
