@@ -92,7 +92,8 @@ def test_drive_moves_the_agent_as_asked_in_five_fresh_processes(ros, realtime):
         match = re.fullmatch(r"sent (\d+) Twists to /agent_0/cmd_vel \(1 subscriber\) over (\S+) s, "
                              r"then a zero Twist\n", done.stdout)
         assert match, done.stdout
-        assert 38 <= int(match[1]) <= 41 and abs(float(match[2]) - 2.0) < 0.1
+        # the report gives the measured wall time: a loaded machine can stall the last wait a little
+        assert 38 <= int(match[1]) <= 41 and abs(float(match[2]) - 2.0) < 0.3
         ros.spin_for(0.5)  # the zero command stops the agent within a step or two
         end = _position(poses)
         distances.append(math.dist(start, end))
@@ -121,9 +122,11 @@ def test_drive_without_a_node_says_so():
     (["--seconds", "-1"], "--seconds must be a finite number >= 0, got -1.0"),
     (["agent 0"], "'agent 0/cmd_vel' is not a valid ROS 2 name"),
 ])
-def test_drive_refuses_bad_arguments(args, message):
-    done = vmas_ros_cli("drive", *args)
-    assert done.returncode == 2 and message in done.stderr, done.stderr
+def test_drive_refuses_bad_arguments(args, message, capsys):
+    from vmas_ros.cli import main
+
+    assert main(["drive", *args]) == 2  # refused before any node starts
+    assert message in capsys.readouterr().err
 
 
 def test_echo_reads_a_relative_name(realtime):
