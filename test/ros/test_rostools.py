@@ -25,7 +25,6 @@ from vmas_ros.rostools import param
 from vmas_ros.rostools.bag import summarize_bag
 from vmas_ros.rostools.call import call
 from vmas_ros.rostools.graph import ToolError, resolve_name
-from vmas_ros.rostools.topics import list_topics
 
 pytestmark = [pytest.mark.ros]
 
@@ -136,12 +135,15 @@ def test_echo_reads_a_relative_name(realtime):
 
 
 # ---------------------------------------------------------- graph tools
-def test_topics_and_services_are_listed_with_their_types(realtime):
-    lines = []
-    list_topics(wait=5.0, out=lines.append)  # margin over discovery's periodic announcements
+def test_topics_and_services_are_listed_with_their_types(realtime, capsys):
+    """``vmas-ros topics`` through the CLI's main, in this process: the second run reuses its tool node."""
+    from vmas_ros.cli import main
+
+    assert main(["topics", "--wait", "5"]) == 0  # margin over discovery's periodic announcements
+    lines = capsys.readouterr().out.splitlines()
     assert {"/agent_0/pose [geometry_msgs/msg/PoseStamped]", "/agent_0/cmd_vel [geometry_msgs/msg/Twist]"} <= set(lines)
-    services = list_topics(wait=0.5, services=True, show_types=False, out=lambda line: None)  # the same node: known
-    assert {"/sim_node/reset", "/sim_node/pause", "/sim_node/step"} <= set(services)
+    assert main(["topics", "--services", "--no-types", "--wait", "0.5"]) == 0
+    assert {"/sim_node/reset", "/sim_node/pause", "/sim_node/step"} <= set(capsys.readouterr().out.split())
 
 
 def test_call_pauses_steps_and_resumes_the_node(ros, realtime):

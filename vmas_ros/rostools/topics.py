@@ -12,8 +12,8 @@ def graph_names(wait: float = 3.0, services: bool = False) -> Dict[str, List[str
     """Name -> types of every topic (or service) seen after ``wait`` seconds of discovery.
 
     Discovery has no end a tool could wait for, and a participant whose first
-    announcements were missed is seen only at a later one: on one machine that
-    takes up to about 2 s, hence the default wait.
+    announcements were missed is seen only at a periodic later one, hence the
+    default wait.
     """
     with tool_node("vmas_ros_topics") as tool:
         tool.spin_for(wait)
