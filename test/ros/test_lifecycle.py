@@ -1,7 +1,9 @@
 """lifecycle: the last shutdown tolerates rclpy's own signal handling finishing it first."""
 from __future__ import annotations
 
+import gc
 import signal
+import sys
 
 import pytest
 import rclpy
@@ -72,3 +74,29 @@ def test_an_error_out_of_a_stop_signal_is_a_clean_stop(monkeypatch, signalled):
         for sig, handler in handlers.items():  # run_node ignores both signals while it cleans up
             signal.signal(sig, handler)
     assert not rclpy.ok()
+
+
+class _Broken:
+    def __del__(self):
+        raise AttributeError("not rclpy's")
+
+
+@pytest.mark.parametrize("stopping", [True, False])
+def test_a_task_half_built_by_a_stop_signal_prints_no_traceback(monkeypatch, capsys, stopping):
+    """A stop signal's KeyboardInterrupt inside rclpy's Task constructor leaves a task without its
+    attributes, and its __del__ fails. After a stop the running node's hook drops that message, and
+    only that one; before a stop it is printed as usual."""
+    from rclpy.task import Task
+
+    monkeypatch.setattr(startup, "_guard", startup._Guard("lifecycle_test"))
+    monkeypatch.setattr(sys, "unraisablehook", sys.unraisablehook)  # put back after the test
+    startup.hand_over()
+    startup._guard.stopping = stopping
+    half_built = Task.__new__(Task)  # what an interrupted __init__ leaves behind
+    del half_built
+    other = _Broken()
+    del other
+    gc.collect()
+    printed = capsys.readouterr().err
+    assert ("Future.__del__" in printed) is not stopping, printed
+    assert "not rclpy's" in printed

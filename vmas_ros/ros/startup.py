@@ -20,7 +20,9 @@ vmas_ros. Its handler has two phases:
   ``run_node`` stops the node, closes its bag and exits 0. During a recorder
   write the handler only notes the signal (the recorder calls its ``hold`` and
   ``release``) and raises once the write is complete, so a bag never ends in
-  half a step.
+  half a step. A KeyboardInterrupt that lands inside the constructor of one
+  of rclpy's tasks leaves that task half built, and its ``__del__`` would
+  print a traceback; once a stop was asked for, that one message is dropped.
 
 A library user who imports the nodes gets none of this: only the entry
 points call :func:`guard`.
@@ -90,6 +92,24 @@ def hand_over() -> None:
     """The node is about to be built (rclpy is initialised): signals now stop it through KeyboardInterrupt."""
     if _guard is not None:
         _guard.handed_over = True
+        sys.unraisablehook = _unraisable
+
+
+def _half_built_future(unraisable) -> bool:
+    """Whether ``unraisable`` is an rclpy Future's ``__del__`` failing on an attribute its constructor
+    never set: what a KeyboardInterrupt raised inside that constructor leaves behind."""
+    where = unraisable.object
+    return (isinstance(unraisable.exc_value, AttributeError) and getattr(where, "__name__", None) == "__del__"
+            and getattr(where, "__module__", None) == "rclpy.task")
+
+
+def _unraisable(unraisable) -> None:
+    """``sys.unraisablehook`` of a running node. A stop signal raises KeyboardInterrupt wherever the
+    main thread is, sometimes inside the constructor of an executor's task; that half-built task's
+    ``__del__`` then prints a traceback to a user who only pressed Ctrl-C. Once a stop was asked for,
+    that one message is dropped; every other goes to Python's default hook."""
+    if not (stop_requested() and _half_built_future(unraisable)):
+        sys.__unraisablehook__(unraisable)
 
 
 def stop_requested() -> bool:
