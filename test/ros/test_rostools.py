@@ -223,9 +223,10 @@ def test_bag_play_republishes_every_message_with_its_timing(ros, tmp_path):
     path = tmp_path / "run.mcap"
     _write_sample(path)
     poses = ros.collect(PoseStamped, "/agent_0/pose")
-    # --delay 3: a new participant's first announcements can be missed, and its next come seconds later
+    # --delay 5: a new participant's first announcements can be missed, and its next periodic one comes
+    # about 3 s later (a delay of 3 s once lost the first messages)
     player = subprocess.Popen([sys.executable, "-m", "vmas_ros.cli", "bag", "play", str(path), "--quiet",
-                               "--delay", "3.0"], cwd=REPO, env=sim_env(), stdout=subprocess.PIPE,
+                               "--delay", "5.0"], cwd=REPO, env=sim_env(), stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
     try:
         ros.spin_until(lambda: player.poll() is not None, 60, "bag play to finish")
