@@ -114,6 +114,8 @@ def run_train_command(args: argparse.Namespace) -> int:
         summary = trainer.run()
     except (KeyboardInterrupt, CollectorLost) as error:
         return _stopped_early(trainer, error)
+    finally:
+        trainer.close()  # idempotent: whatever else goes wrong, the collectors stop and Ray is left
     last = trainer.history[-1] if trainer.history else {}
     print(f"trained {config.algorithm} on {config.scenario}: {summary['iterations']} iterations, "
           f"{summary['frames']} frames; last mean episode reward {last.get('episode_reward_mean', float('nan')):.4f}")
