@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 from typing import List, Optional, Sequence
@@ -40,8 +39,6 @@ def _rgba(red: int, green: int, blue: int, alpha: int) -> str:
 SCAN_COLOUR = _rgba(230, 50, 50, 255)  # scan hits in red, apart from the scene's colours
 GRID_COLOUR = _rgba(36, 142, 255, 64)  # a faint blue under the scene
 
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
-_FRAME = re.compile(r"(?:[A-Za-z_][A-Za-z0-9_]*/)*[A-Za-z_][A-Za-z0-9_]*$")
 
 
 def _three_d(world_frame: str, agents: Sequence[str]) -> dict:
@@ -83,14 +80,19 @@ def foxglove_layout(world_frame: str = "world", agents: Sequence[str] = DEFAULT_
     ``swarm_a/world``); ``agents`` are names as the node publishes them (at
     least one). Raises ValueError naming a bad value.
     """
-    if not isinstance(world_frame, str) or not _FRAME.match(world_frame):
-        raise ValueError(f"the world frame must be names joined by '/' (e.g. 'swarm_a/world'), got {world_frame!r}")
+    from vmas_ros.rostools.graph import ToolError, resolve_name
+
+    if not isinstance(world_frame, str) or not world_frame or world_frame.startswith("/"):
+        raise ValueError(f"the world frame must be a frame name not starting with '/' (e.g. 'swarm_a/world'), "
+                         f"got {world_frame!r}")
     agents = tuple(agents)
     if not agents:
         raise ValueError("a layout needs at least one agent (Teleop drives the first)")
-    bad = [a for a in agents if not isinstance(a, str) or not _NAME.match(a)]
-    if bad:
-        raise ValueError(f"agent names must be ROS name tokens (letters, digits, '_'), got {bad[0]!r}")
+    for agent in agents:  # each names topics such as /<agent>/cmd_vel
+        try:
+            resolve_name(f"{agent}/cmd_vel")
+        except (ToolError, AttributeError, TypeError):
+            raise ValueError(f"agent names must be ROS name tokens (letters, digits, '_'), got {agent!r}") from None
     panels = {"3D!vmas_scene": _three_d(world_frame, agents), f"Teleop!{agents[0]}": _teleop(agents[0]),
               "Plot!rewards": _plot(agents)}
     arrangement = {"direction": "row", "first": "3D!vmas_scene",
@@ -143,7 +145,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from vmas_ros.ros.params import _frame_prefix
+
     try:
+        refused = _frame_prefix(args.frame_prefix, None)  # the node's own rule for its frame_prefix
+        if refused:
+            raise ValueError(refused)
         text = layout_json(foxglove_layout(args.frame_prefix + args.frame_id, parse_agents(args.agents)))
     except ValueError as error:
         print(f"vmas-ros foxglove-layout: {error}", file=sys.stderr)
