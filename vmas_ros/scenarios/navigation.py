@@ -1,9 +1,9 @@
 """navigation: every agent drives to its own goal without bumping into the others.
 
 Description
-    ``n_agents`` discs (radius ``agent_radius``, holonomic, force actions in
-    [-1, 1]) and as many goal marks (non-colliding discs of radius 0.05, one
-    per agent, in the agent's colour) in an unbounded plane, or inside walls
+    ``n_agents`` discs (radius ``agent_radius``) and as many goal marks
+    (non-colliding discs of radius 0.05, one per agent, in the agent's
+    colour) in an unbounded plane, or inside walls
     at ``+-world_spawning_x``/``+-world_spawning_y`` with ``enforce_bounds``.
     Each agent must reach its goal; with ``collisions`` the agents collide
     with one another and carry a lidar (``n_lidar_rays`` rays evenly round
@@ -12,12 +12,23 @@ Description
     one goal (then ``collisions`` must be off); with ``split_goals`` the first
     and the second half of the team each share one goal. This is the
     navigation task of the VMAS paper (and of the BenchMARL/TorchRL tutorials).
+Dynamics
+    ``dynamics="holonomic"`` (VMAS's task): force actions in [-1, 1] along
+    the world axes; the agents never turn. ``dynamics="diff_drive"``: the
+    engine's ``DiffDrive`` (unicycle) model, actions (forward speed in
+    [-max_speed, max_speed] m/s, turn rate in [-max_turn_rate,
+    max_turn_rate] rad/s), the ``cmd_vel`` of a wheeled ROS base; the agents
+    turn, and their lidar turns with them (its ray angles are relative to the
+    agent's heading). These agents have no drag, so they move at the
+    commanded speed and turn rate, as a base under its wheel controller does.
 Observation (per agent, in this order)
-    own position (2), own velocity (2); its position minus its goal's (2) or,
+    own position (2), own velocity (2); with ``diff_drive``, the cosine and
+    sine of its heading (2); its position minus its goal's (2) or,
     with ``observe_all_goals``, its position minus every agent's goal in agent
     order (2 x n_agents); with ``collisions``, the lidar's proximities
     ``lidar_range - distance`` (``n_lidar_rays``; 0 where a ray hits nothing,
-    ray ``k`` at angle ``2 pi k / n_lidar_rays``).
+    ray ``k`` at angle ``2 pi k / n_lidar_rays``: from the world's x axis for
+    holonomic agents, from the agent's heading with ``diff_drive``).
 Reward
     The decrease since the last step of the agent's distance to its goal
     (x ``pos_shaping_factor``); with ``shared_rew`` the decrease of the
@@ -34,7 +45,9 @@ Starting state
     world_spawning_x] x [-world_spawning_y, world_spawning_y]``, every two at
     least ``2 agent_radius + 0.05`` apart; all at rest. Shared goals take the
     position drawn for the goal of the first agent sharing it (the unused
-    draws still keep the others away from it).
+    draws still keep the others away from it). Holonomic agents face along
+    +x; with ``diff_drive`` each agent's heading is uniform in [-pi, pi),
+    drawn per env after the positions.
 Episode termination
     When every agent is closer to its goal than its own radius
     (``agent_radius``, not the goal's: VMAS 1.5's rule).
@@ -45,24 +58,31 @@ Kwargs
     ``observe_all_goals`` (False), ``lidar_range`` (0.35), ``agent_radius``
     (0.1), ``comms_range`` (0; only drawn: lines between agents this close),
     ``n_lidar_rays`` (12), ``shared_rew`` (True), ``pos_shaping_factor`` (1),
-    ``final_reward`` (0.01), ``agent_collision_penalty`` (-1).
+    ``final_reward`` (0.01), ``agent_collision_penalty`` (-1),
+    ``dynamics`` ("holonomic" or "diff_drive"; "holonomic"), and, read with
+    ``diff_drive`` only (checked to be positive either way), ``max_speed``
+    (0.5 m/s) and ``max_turn_rate`` (2.0 rad/s).
 Deviations from VMAS 1.5
     Inconsistent kwargs raise ValueError instead of failing an assert. Agents
     past the seventh get fixed colours spread round the hue circle (VMAS draws
     them from ``torch.randn`` at construction, which also shifts the global
     RNG stream). Rewards, observations, dones and infos are otherwise VMAS's.
+    ``dynamics``, ``max_speed`` and ``max_turn_rate`` are ours (VMAS 1.5
+    has no such kwargs): with the default dynamics the task is VMAS's.
 """
 from __future__ import annotations
 
 import colorsys
+import math
 from typing import Optional
 
 import torch
 from torch import Tensor
 
 from vmas_ros.scenarios.common import for_index as shaped_for
-from vmas_ros.scenarios.common import configure, heuristic_kwargs, range_links
+from vmas_ros.scenarios.common import check_number, configure, heuristic_kwargs, range_links, selected_rows
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
+from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.neighbours import ClosePairs
 from vmas_ros.simulator.scenario import BaseScenario
@@ -74,8 +94,11 @@ DEFAULTS = {
     "n_agents": 4, "collisions": True, "world_spawning_x": 1, "world_spawning_y": 1, "enforce_bounds": False,
     "agents_with_same_goal": 1, "split_goals": False, "observe_all_goals": False, "lidar_range": 0.35,
     "agent_radius": 0.1, "comms_range": 0, "n_lidar_rays": 12, "shared_rew": True, "pos_shaping_factor": 1,
-    "final_reward": 0.01, "agent_collision_penalty": -1,
+    "final_reward": 0.01, "agent_collision_penalty": -1, "dynamics": "holonomic", "max_speed": 0.5,
+    "max_turn_rate": 2.0,
 }
+#: the values of the ``dynamics`` kwarg
+DYNAMICS = ("holonomic", "diff_drive")
 GOAL_RADIUS = 0.05  # the goal marks' radius (the engine's default disc): "on goal" for the final reward
 SPAWN_CLEARANCE = 0.05  # extra gap between any two spawned entities, beyond two agent radii
 TOUCH_DISTANCE = 0.005  # surfaces closer than this count as a collision in the reward
@@ -129,6 +152,10 @@ def validate(config: dict) -> None:
 
     whole("n_agents", 1)
     whole("n_lidar_rays", 1)
+    if config["dynamics"] not in DYNAMICS:
+        raise ValueError(f"navigation: dynamics must be one of {', '.join(DYNAMICS)}, got {config['dynamics']!r}")
+    for name in ("max_speed", "max_turn_rate"):
+        check_number("navigation", name, config[name], strict=True)
     for name in ("world_spawning_x", "world_spawning_y", "lidar_range", "agent_radius"):
         number(name, positive=True)
     number("comms_range", positive=False)
@@ -170,9 +197,13 @@ class Scenario(BaseScenario):
             sensors = None
             if self.collisions:
                 sensors = [Lidar(world, n_rays=self.n_lidar_rays, max_range=self.lidar_range, entity_filter=is_agent)]
+            steering = {}
+            if self.dynamics == "diff_drive":  # no drag: the agent moves at the commanded speed, as a base does
+                steering = dict(u_range=[self.max_speed, self.max_turn_rate], u_multiplier=[1.0, 1.0],
+                                drag=0.0, dynamics=DiffDrive(world))
             agent = Agent(
                 name=f"agent_{i}", collide=self.collisions, color=agent_color(i), shape=Sphere(radius=self.agent_radius),
-                render_action=True, sensors=sensors,
+                render_action=True, sensors=sensors, **steering,
             )
             agent.goal = goal
             world.add_agent(agent)
@@ -216,6 +247,11 @@ class Scenario(BaseScenario):
             for i, agent in enumerate(world.agents):
                 agent.set_pos(shaped_for(agents[:, i], env_index), batch_index=env_index)
                 agent.goal.set_pos(shaped_for(goals[:, i], env_index), batch_index=env_index)
+        if self.dynamics == "diff_drive":  # drawn after the positions: their draws stay holonomic's
+            headings = torch.empty(selected_rows(world.batch_dim, env_index), self.n_agents, device=world.device)
+            headings.uniform_(-math.pi, math.pi)
+            for i, agent in enumerate(world.agents):
+                agent.set_rot(shaped_for(headings[:, i : i + 1], env_index), batch_index=env_index)
         shaping = torch.linalg.vector_norm(agents - goals, dim=-1) * self.pos_shaping_factor
         if env_index is None:
             self.pos_shaping = shaping
@@ -293,6 +329,9 @@ class Scenario(BaseScenario):
         else:
             to_goals = pos - goals
         parts = [pos, vel, to_goals]
+        if self.dynamics == "diff_drive":  # the heading as (cos, sin), after the velocity: [n, B, 2]
+            rot = world.stacked_state("rot").index_select(0, self._agent_rows)
+            parts.insert(2, torch.cat([torch.cos(rot), torch.sin(rot)], dim=-1))
         if self.collisions:
             parts.append(self.lidar_range - self._lidars[0].stacked_measure(self._lidars))
         obs = torch.cat(parts, dim=-1)
@@ -346,6 +385,14 @@ class HeuristicPolicy(BaseHeuristicPolicy):
     agents meeting head-on pass each other instead of stalling). The force
     is a velocity loop on the wanted velocity, clipped to the action range.
 
+    With ``dynamics="diff_drive"`` the observation carries the heading
+    ``(cos, sin)`` at ``obs[4:6]`` (the goal block follows it) and the lidar
+    rays are relative to it, so their directions are turned by the heading
+    first. The wanted world velocity then becomes (forward speed, turn rate):
+    the speed is its component along the heading (negative: backing away
+    from a neighbour ahead), the turn rate ``turn_gain`` x the angle from the
+    heading to it, each clipped to the agent's ``u_range``.
+
     ``clf_epsilon`` and ``clf_slack`` are VMAS's heuristic's QP parameters
     (decay rate of the CLF, cost of relaxing it): accepted, so VMAS code that
     passes them runs, and checked to be positive; this controller has no QP
@@ -357,6 +404,7 @@ class HeuristicPolicy(BaseHeuristicPolicy):
     velocity_gain = 4.0
     repulsion = 3.0
     swerve = 0.6
+    turn_gain = 3.0
 
     def __init__(self, continuous_action: bool = True, clf_epsilon: float = 0.2, clf_slack: float = 100.0,
                  goal_slot: int = 0, **scenario_kwargs) -> None:
@@ -368,27 +416,49 @@ class HeuristicPolicy(BaseHeuristicPolicy):
         n_goals = cfg["n_agents"] if cfg["observe_all_goals"] else 1
         if isinstance(goal_slot, bool) or not isinstance(goal_slot, int) or not 0 <= goal_slot < n_goals:
             raise ValueError(f"navigation heuristic: goal_slot must be an int in [0, {n_goals}), got {goal_slot!r}")
-        self.goal_start = 4 + 2 * goal_slot
+        if cfg["dynamics"] not in DYNAMICS:
+            raise ValueError(f"navigation heuristic: dynamics must be one of {', '.join(DYNAMICS)}, "
+                             f"got {cfg['dynamics']!r}")
+        self.steered = cfg["dynamics"] == "diff_drive"
+        heading = 2 if self.steered else 0
+        self.goal_start = 4 + heading + 2 * goal_slot
         self.n_rays = cfg["n_lidar_rays"] if cfg["collisions"] else 0
         self.lidar_range = float(cfg["lidar_range"])
-        self.width = 4 + 2 * n_goals + self.n_rays
+        self.width = 4 + heading + 2 * n_goals + self.n_rays
         angles = 2 * torch.pi * torch.arange(self.n_rays, dtype=torch.float32) / max(self.n_rays, 1)
         self._rays = torch.stack([torch.cos(angles), torch.sin(angles)], dim=-1)  # [R, 2] unit ray directions
 
-    def compute_action(self, observation: Tensor, u_range: float) -> Tensor:
+    def compute_action(self, observation: Tensor, u_range) -> Tensor:
+        """[B, 2]: a force (holonomic, ``u_range`` a number) or (speed, turn rate) (``diff_drive``,
+        ``u_range`` the pair of their limits)."""
         if observation.shape[1] != self.width:
             raise ValueError(
                 f"navigation heuristic: expected observation width {self.width}, got {observation.shape[1]}"
             )
-        vel = observation[:, 2:4]
         to_goal = -observation[:, self.goal_start : self.goal_start + 2]
         wanted = TorchUtils.clamp_with_norm(self.gain * to_goal, self.max_speed)
         if self.n_rays:
-            rays = self._rays.to(observation.device, observation.dtype)
             closeness = observation[:, -self.n_rays :] / self.lidar_range  # [B, R], 1 = touching
-            towards = closeness @ rays  # [B, 2]: where the neighbours are, weighted by closeness
+            towards = closeness @ self._rays.to(observation.device, observation.dtype)  # [B, 2], ray frame
+            if self.steered:  # body-frame rays: turn the sum by the heading into the world frame
+                cos, sin = observation[:, 4], observation[:, 5]
+                towards = torch.stack([cos * towards[:, 0] - sin * towards[:, 1],
+                                       sin * towards[:, 0] + cos * towards[:, 1]], dim=-1)
             sideways = torch.stack([towards[:, 1], -towards[:, 0]], dim=-1)
             wanted = wanted - self.repulsion * towards + self.swerve * self.repulsion * sideways
             wanted = TorchUtils.clamp_with_norm(wanted, self.max_speed)
-        force = self.velocity_gain * (wanted - vel)
+        if self.steered:
+            return self._steer(wanted, observation[:, 4:6], u_range)
+        force = self.velocity_gain * (wanted - observation[:, 2:4])
         return force.clamp(-u_range, u_range)
+
+    def _steer(self, wanted: Tensor, heading: Tensor, u_range) -> Tensor:
+        """(speed, turn rate) [B, 2] following the world velocity ``wanted`` [B, 2] from ``heading`` (cos, sin)."""
+        if isinstance(u_range, (int, float)) or len(u_range) != 2:
+            raise ValueError(
+                f"navigation heuristic: diff_drive needs u_range (max_speed, max_turn_rate), got {u_range!r}")
+        max_speed, max_turn = (float(u) for u in u_range)
+        forward = (wanted * heading).sum(dim=-1)
+        across = heading[:, 0] * wanted[:, 1] - heading[:, 1] * wanted[:, 0]
+        turn = self.turn_gain * torch.atan2(across, forward)  # 0 where nothing is wanted (atan2(0, 0))
+        return torch.stack([forward.clamp(-max_speed, max_speed), turn.clamp(-max_turn, max_turn)], dim=-1)
