@@ -101,8 +101,13 @@ def _policy_node_policy_path(value: str, current) -> Optional[str]:
 
 
 def _adapter(value: str, current) -> Optional[str]:
-    if value and (value.count(":") != 1 or not all(value.split(":"))):
-        return f"adapter must be 'package.module:Class' (empty: the agents' observation topics), got {value!r}"
+    from vmas_ros.adapters import ADAPTER_NAMES
+
+    if not value or value in ADAPTER_NAMES:
+        return None
+    if value.count(":") != 1 or not all(value.split(":")):
+        return (f"adapter must be one of {', '.join(sorted(ADAPTER_NAMES))}, 'package.module:Class', or empty "
+                f"(the agents' observation topics), got {value!r}")
     return None
 
 
@@ -279,8 +284,8 @@ POLICY_PARAMS = ParamTable("policy_node", [
     Param("rate_hz", 10.0, "policy steps per second", runtime=True, minimum=MIN_RATE, maximum=MAX_POLICY_RATE),
     Param("observation_timeout", 0.5, "seconds after which an input message is too old to act on", runtime=True,
           minimum=0.0, strict=True),
-    Param("adapter", "", "observation adapter package.module:Class; empty: each agent's <agent>/observation",
-          check=_adapter),
+    Param("adapter", "", "observation adapter: navigation, simple_spread, diff_drive, goal or package.module:Class; "
+          "empty: each agent's <agent>/observation", check=_adapter),
     Param("adapter_kwargs", "{}", "JSON or YAML-flow mapping passed to the adapter",
           check=_mapping("adapter_kwargs", "'{\"scale\": 2}'")),
     Param("cmd_vel_scale", 1.0, "metres per second per action unit for output: cmd_vel", runtime=True,
