@@ -62,6 +62,7 @@ setup(
             # startup.py installs the signal handlers, then imports the node (torch, rclpy)
             "sim_node = vmas_ros.ros.startup:sim_node_main",
             "policy_node = vmas_ros.ros.startup:policy_node_main",
+            "robot_fleet = vmas_ros.ros.startup:fleet_main",
         ],
     },
     zip_safe=False,

@@ -34,7 +34,7 @@ import signal
 import sys
 from typing import Optional
 
-__all__ = ["guard", "hand_over", "policy_node_main", "sim_node_main", "stop_requested"]
+__all__ = ["fleet_main", "guard", "hand_over", "policy_node_main", "sim_node_main", "stop_requested"]
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -131,5 +131,13 @@ def policy_node_main() -> int:
     """Console-script entry of ``policy_node``: the guard first, then the heavy imports."""
     guard("policy_node")
     from vmas_ros.ros.policy_node import main
+
+    return main()
+
+
+def fleet_main() -> int:
+    """Console-script entry of ``robot_fleet``: the guard first, then rclpy (the fleet imports no torch)."""
+    guard("robot_fleet")
+    from vmas_ros.fleet.node import main
 
     return main()
