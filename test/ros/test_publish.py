@@ -26,7 +26,8 @@ from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
 import vmas_ros
-from vmas_ros.ros import convert
+from vmas_ros.ros import convert, sim_setup
+from vmas_ros.ros.params import SimParams
 from test.simulator.lidar_setup import randomise, with_lidars
 from vmas_ros.ros.publish import StateMessages
 from vmas_ros.simulator import lidar_batch
@@ -41,7 +42,8 @@ def _markers(world, frame: str) -> MarkerArray:
     return markers
 
 
-def _reference(world, names: List[str], geometry, snap, stamp_ns: int, frame: str, env_index: int) -> Dict[str, bytes]:
+def _reference(world, names: List[str], geometry, snap, stamp_ns: int, frame: str, env_index: int,
+               goals: Dict[int, int]) -> Dict[str, bytes]:
     """The per-message conversion, field by field (what sim_node published before the bulk path)."""
     stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
     out = {"/clock": serialize_message(Clock(clock=stamp))}
@@ -56,6 +58,11 @@ def _reference(world, names: List[str], geometry, snap, stamp_ns: int, frame: st
         convert.set_pose(pose.pose, x, y, yaw)
         convert.fill_odometry(odom, x, y, yaw, snap.vel[k, 0], snap.vel[k, 1], snap.ang_vel[k])
         out[f"/{name}/pose"], out[f"/{name}/odom"] = serialize_message(pose), serialize_message(odom)
+        if i in goals:
+            goal, g = PoseStamped(), goals[i]
+            goal.header.frame_id, goal.header.stamp = frame, stamp
+            convert.set_pose(goal.pose, snap.pos[g, 0], snap.pos[g, 1], snap.rot[g])
+            out[f"/{name}/goal"] = serialize_message(goal)
         for j, ranges in enumerate(snap.scans.get(i, [])):
             scan = LaserScan()
             scan.header.frame_id, scan.header.stamp = f"{name}/base_link", stamp
@@ -78,26 +85,39 @@ def _reference(world, names: List[str], geometry, snap, stamp_ns: int, frame: st
     return out
 
 
-@pytest.mark.parametrize("scenario, kwargs, rays", [
-    ("simple_spread", {"n_agents": 4}, (12,)),
-    ("waterfall", {}, (7, 16)),  # boxes and lines; two lidars per agent (scan and scan_1)
-    ("transport", {}, (5,)),  # a package colour drawn per env
+#: the node's own lidar as the robot profile makes it, at a smaller size: half a circle, a range_min
+ROBOT_LIDAR = {"robot_lidar": True, "lidar_rays": 31, "lidar_angle_min": -math.pi / 2, "lidar_angle_max": math.pi / 2,
+               "lidar_range": 2.0, "lidar_range_min": 0.5}
+
+
+@pytest.mark.parametrize("scenario, kwargs, rays, robot", [
+    ("simple_spread", {"n_agents": 4}, (12,), False),
+    ("waterfall", {}, (7, 16), False),  # boxes and lines; two lidars per agent (scan and scan_1)
+    ("transport", {}, (5,), False),  # a package colour drawn per env
+    ("navigation", {"n_agents": 6}, (), True),  # goals; the node's lidar (-inf below range_min), then the scenario's
 ])
-def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays):
+def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays, robot):
     env = vmas_ros.make_env(scenario, num_envs=3, seed=1, **kwargs)
     with_lidars(env, rays)
     world = env.world
     names = convert.unique_names([a.name for a in world.agents])
-    lidars = convert.agent_lidars(world)
-    geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
+    params = SimParams(**ROBOT_LIDAR) if robot else SimParams(add_lidar=False)
+    own = sim_setup.add_node_lidars(world, params)
+    lidars = sim_setup.published_lidars(world, own)
+    geometry = sim_setup.scan_geometry(lidars, own, params.lidar_range_min)
+    goals = sim_setup.goal_rows(world, env.scenario)
+    assert bool(goals) == (scenario == "navigation")
     frame = "map"
     messages = StateMessages(names, len(world.landmarks), len(world.entities), geometry,
-                             {i: [s.n_rays for s in ls] for i, ls in lidars.items()}, frame, _markers(world, frame))
+                             {i: [s.n_rays for s in ls] for i, ls in lidars.items()}, frame, _markers(world, frame),
+                             goals=goals)
     per_env = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
     if per_env:
         messages.set_colour_fields(per_env)
-    assert len(messages.topics) == len(set(messages.topics)) == 4 + len(names) * (2 + len(rays))
+    n_scans = sum(len(ls) for ls in lidars.values())
+    assert len(messages.topics) == len(set(messages.topics)) == 4 + 2 * len(names) + n_scans + len(goals)
     rng = torch.Generator().manual_seed(7)
+    node_scans = []
     for trial in range(6):
         randomise(env, rng)
         env_index = trial % env.num_envs
@@ -105,7 +125,7 @@ def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays):
         snap = convert.Snapshot.take(world, env_index, lidars)
         colours = [c for k in per_env for c in convert.rgb(world.entities[k].color, env_index)] if per_env else None
         messages.fill(snap, stamp_ns, colours)
-        expected = _reference(world, names, geometry, snap, stamp_ns, frame, env_index)
+        expected = _reference(world, names, geometry, snap, stamp_ns, frame, env_index, goals)
         assert sorted(expected) == sorted("/" + t.lstrip("/") for t in messages.topics)
         for topic, kind, payload in messages.payloads():
             reference = expected["/" + topic.lstrip("/")]
@@ -115,6 +135,10 @@ def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays):
             assert mine == theirs, f"{topic} differs from the per-message conversion (trial {trial})"
         scans = [np.concatenate(s) for s in snap.scans.values()]
         assert any(np.isinf(np.where(s >= 2.0, np.inf, s)).any() for s in scans)  # some rays hit nothing
+        node_scans += [np.array(messages.decode(f"{names[i]}/scan").ranges) for i in own]
+    if robot:  # some rays of the node's lidars read -inf (something closer than range_min), some a distance
+        published = np.concatenate(node_scans)
+        assert (published == -np.inf).any() and np.isfinite(published).any()
 
 
 def test_bulk_payloads_deserialise_to_the_state():

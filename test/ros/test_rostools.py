@@ -178,7 +178,7 @@ def test_param_lists_gets_describes_and_sets_env_index(ros, realtime):
     described.clear()
     param.describe_parameter(NODE, "lidar_rays", out=described.append)
     assert "  Integer range: 1 to 4096" in described and "  Read only: True" in described, described
-    assert "  Description: rays of that lidar, evenly over 360 degrees" in described, described
+    assert "  Description: rays of that lidar, evenly from lidar_angle_min to lidar_angle_max" in described, described
     poses = ros.collect(PoseStamped, "/agent_0/pose")
     poses.wait_for(2)
     env_0 = _position(poses)

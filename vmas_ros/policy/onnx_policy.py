@@ -24,13 +24,14 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
 from vmas_ros.policy.protobuf_wire import ProtobufFormatError, read_fields
 
-__all__ = ["OnnxPolicy", "validate_metadata", "POLICY_FORMAT", "POLICY_VERSION", "sha256_of_file", "external_tensors"]
+__all__ = ["OnnxPolicy", "read_metadata", "validate_metadata", "POLICY_FORMAT", "POLICY_VERSION", "sha256_of_file",
+           "external_tensors"]
 
 #: value of the metadata's "format" key
 POLICY_FORMAT = "vmas_ros.policy"
@@ -119,6 +120,33 @@ def validate_metadata(meta: Any, source: str = "policy metadata") -> Dict[str, A
     if not re.fullmatch(r"[0-9a-f]{64}", meta["onnx_sha256"]):
         raise ValueError(f"{source}: 'onnx_sha256' must be 64 lowercase hex digits, got {meta['onnx_sha256']!r}")
     return meta
+
+
+def read_metadata(path: Union[str, Path]) -> Tuple[Path, Dict[str, Any]]:
+    """``(<stem>.json, its checked metadata)`` of the policy at ``path`` (either file of the pair).
+
+    Reads only the JSON (no ONNX, no onnxruntime), so a caller may learn the
+    policy's scenario before anything is built; raises ``ValueError`` naming
+    the file and what is wrong with it.
+    """
+    path = Path(path)
+    if path.suffix == ".json":
+        json_path = path
+    elif path.suffix == ".onnx":
+        json_path = path.with_suffix(".json")
+    else:
+        raise ValueError(f"policy path must end in .json or .onnx, got {str(path)!r}")
+    if not json_path.is_file():
+        raise ValueError(f"policy metadata file {str(json_path)!r} does not exist")
+    size = json_path.stat().st_size
+    if size > MAX_METADATA_BYTES:
+        raise ValueError(f"{json_path}: {size} bytes is too big for policy metadata "
+                         f"(at most {MAX_METADATA_BYTES}); is it the right file?")
+    try:
+        meta = json.loads(json_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
+        raise ValueError(f"{json_path}: not valid JSON: {error}") from error
+    return json_path, validate_metadata(meta, source=str(json_path))
 
 
 # ------------------------------------------------------------------ external data
@@ -249,23 +277,7 @@ class OnnxPolicy:
         import onnxruntime as ort
 
         path = Path(path)
-        if path.suffix == ".json":
-            json_path = path
-        elif path.suffix == ".onnx":
-            json_path = path.with_suffix(".json")
-        else:
-            raise ValueError(f"policy path must end in .json or .onnx, got {str(path)!r}")
-        if not json_path.is_file():
-            raise ValueError(f"policy metadata file {str(json_path)!r} does not exist")
-        size = json_path.stat().st_size
-        if size > MAX_METADATA_BYTES:
-            raise ValueError(f"{json_path}: {size} bytes is too big for policy metadata "
-                             f"(at most {MAX_METADATA_BYTES}); is it the right file?")
-        try:
-            meta = json.loads(json_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
-            raise ValueError(f"{json_path}: not valid JSON: {error}") from error
-        validate_metadata(meta, source=str(json_path))
+        json_path, meta = read_metadata(path)
         onnx_path = json_path.parent / meta["onnx_file"]
         if path.suffix == ".onnx" and onnx_path.resolve() != path.resolve():
             raise ValueError(f"{json_path}: 'onnx_file' is {meta['onnx_file']!r}, expected {path.name!r}")

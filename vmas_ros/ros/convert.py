@@ -137,28 +137,38 @@ def fill_odometry(msg, x: float, y: float, yaw: float, vx: float, vy: float, wz:
 
 @dataclass
 class ScanGeometry:
-    """LaserScan angles of one lidar; count == round((max - min) / increment) + 1 == n_rays."""
+    """LaserScan angles and ranges of one lidar; count == round((max - min) / increment) + 1 == n_rays.
+
+    The angles are the lidar's own rays: a full circle's last ray stops one
+    increment short of the first (no ray twice), a partial span ends on its
+    ``angle_end``. ``range_min`` 0 means the lidar has none.
+    """
 
     angle_min: float
     angle_max: float
     angle_increment: float
     range_max: float
+    range_min: float = 0.0
 
     @staticmethod
-    def of(lidar) -> "ScanGeometry":
+    def of(lidar, range_min: float = 0.0) -> "ScanGeometry":
         angles = lidar.angles[0].detach().cpu().tolist()
         increment = (angles[-1] - angles[0]) / (len(angles) - 1) if len(angles) > 1 else 0.0
-        return ScanGeometry(float(angles[0]), float(angles[-1]), float(increment), float(lidar.max_range))
+        return ScanGeometry(float(angles[0]), float(angles[-1]), float(increment), float(lidar.max_range),
+                            float(range_min))
 
 
 def fill_scan(msg, geometry: ScanGeometry, ranges: np.ndarray) -> None:
-    """REP 117: a ray that hit nothing reads +inf, not max_range."""
+    """REP 117: a ray that hit nothing reads +inf, not max_range; one closer than a ``range_min`` > 0 reads
+    -inf (something is there, too close to measure)."""
     msg.angle_min, msg.angle_max = geometry.angle_min, geometry.angle_max
     msg.angle_increment = geometry.angle_increment
-    msg.range_min, msg.range_max = 0.0, geometry.range_max
+    msg.range_min, msg.range_max = geometry.range_min, geometry.range_max
     msg.time_increment, msg.scan_time = 0.0, 0.0
-    values = np.where(ranges >= geometry.range_max, np.inf, ranges).astype(np.float32)
-    msg.ranges = values.tolist()
+    values = np.where(ranges >= geometry.range_max, np.inf, ranges)
+    if geometry.range_min > 0:
+        values = np.where(ranges < geometry.range_min, -np.inf, values)
+    msg.ranges = values.astype(np.float32).tolist()
 
 
 def shape_marker(marker, entity, marker_id: int, frame_id: str, namespace: str = "entities") -> None:

@@ -8,6 +8,7 @@ their ``--help`` (see :mod:`vmas_ros.ros.param_table`).
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Dict, List, Optional
 
 import yaml
@@ -25,6 +26,9 @@ DEVICES = ("cpu", "cuda", "auto")
 #: upper bounds that catch garbage (1e12 envs, a period rclpy cannot hold in int64 ns) before it runs
 MAX_NUM_ENVS = 10_000_000
 MAX_LIDAR_RAYS = 4096
+#: a lidar spans at most a full circle (plus the rounding a YAML-written 2 pi may carry)
+FULL_CIRCLE = 2 * math.pi
+CIRCLE_SLACK = 1e-5
 MAX_SEED = 2**32 - 1  # numpy's RandomState takes seeds in [0, 2**32)
 #: positive rates / time factors live in this range (0 keeps its "off" meaning where documented):
 #: rclpy turns 1/rate seconds into int64 nanoseconds, so 1e-12 Hz would overflow and kill the node
@@ -77,6 +81,24 @@ def _frame_prefix(value: str, current) -> Optional[str]:
     if value.startswith("/") or not all(c.isalnum() or c in "_/" for c in value) or "//" in value:
         return (f"frame_prefix {value!r} is not a frame name prefix: expected 'auto', '' or letters, digits, "
                 f"'_' and '/' not starting with '/', e.g. 'robot_a/'")
+    return None
+
+
+def _lidar_angle_max(value: float, current) -> Optional[str]:
+    if current is None:  # checked again against lidar_angle_min once every value is read
+        return None
+    low = current.lidar_angle_min
+    if not value > low:
+        return f"lidar_angle_max must be greater than lidar_angle_min, got {value} <= {low}"
+    if value - low > FULL_CIRCLE + CIRCLE_SLACK:
+        return (f"lidar_angle_max - lidar_angle_min must be at most 2 pi ({FULL_CIRCLE:.6f}) radians, got "
+                f"{value} - {low} = {value - low:g} (radians, not degrees)")
+    return None
+
+
+def _lidar_range_min(value: float, current) -> Optional[str]:
+    if current is not None and value >= current.lidar_range:
+        return f"lidar_range_min must be less than lidar_range ({current.lidar_range}), got {value}"
     return None
 
 
@@ -175,8 +197,17 @@ SIM_PARAMS = ParamTable("sim_node", [
     Param("publish_clock", True, "publish /clock; false when another node of the graph owns the clock "
           "(a recording keeps this node's own)"),
     Param("add_lidar", True, "give every agent without a lidar one, so ROS consumers always get scans"),
-    Param("lidar_rays", 16, "rays of that lidar, evenly over 360 degrees", minimum=1, maximum=MAX_LIDAR_RAYS),
-    Param("lidar_range", 2.0, "range of that lidar, m", minimum=0.0, strict=True),
+    Param("robot_lidar", False, "give every agent that lidar, even one the scenario gave lidars of its own: "
+          "published as <agent>/scan, the scenario's as <agent>/scan_1, ..."),
+    Param("lidar_rays", 16, "rays of that lidar, evenly from lidar_angle_min to lidar_angle_max",
+          minimum=1, maximum=MAX_LIDAR_RAYS),
+    Param("lidar_range", 2.0, "range of that lidar (LaserScan range_max), m", minimum=0.0, strict=True),
+    Param("lidar_range_min", 0.0, "readings of that lidar closer than this are published as -inf (REP 117), m",
+          minimum=0.0, note="(0: none)", check=_lidar_range_min),
+    Param("lidar_angle_min", 0.0, "angle of that lidar's first ray, rad, body frame (0: ahead, counter-clockwise)",
+          minimum=-FULL_CIRCLE, maximum=FULL_CIRCLE),
+    Param("lidar_angle_max", FULL_CIRCLE, "angle of its last ray, rad; a span of 2 pi is a full circle whose "
+          "rays do not repeat the first", minimum=-FULL_CIRCLE, maximum=FULL_CIRCLE, check=_lidar_angle_max),
     Param("cmd_vel_timeout", 0.5, "seconds after which an agent's last command is dropped", runtime=True,
           minimum=0.0),
     Param("per_agent_topics", "auto", "each agent's own pose, odom, scan, observation, reward, action and cmd_vel "

@@ -64,15 +64,16 @@ class StateMessages:
     uses float32, ``math`` for trigonometry), so the bytes equal the per-field path.
 
     ``frame_id`` is the world frame as published; ``frame_prefix`` goes before each ``<agent>/base_link``.
-    ``per_agent``: every agent's own pose, odometry and scans (a swarm leaves them out: its agents
-    are in ``agents/poses``); ``cloud``: ``lidar/points``, every lidar ray's hit as a point of one
-    ``sensor_msgs/PointCloud2`` in the world frame (NaN for a ray that hit nothing).
+    ``per_agent``: every agent's own pose, odometry, scans and goal (a swarm leaves them out: its agents
+    are in ``agents/poses``); ``goals``: agent index -> the entity row of its goal, published as
+    ``<agent>/goal`` (a PoseStamped in the world frame); ``cloud``: ``lidar/points``, every lidar ray's
+    hit as a point of one ``sensor_msgs/PointCloud2`` in the world frame (NaN for a ray that hit nothing).
     """
 
     def __init__(self, agent_names: Sequence[str], n_landmarks: int, n_entities: int,
                  scan_geometry: Dict[int, List[convert.ScanGeometry]], scan_rays: Dict[int, List[int]],
                  frame_id: str, markers, per_agent: bool = True, cloud: bool = False,
-                 frame_prefix: str = "") -> None:
+                 frame_prefix: str = "", goals: Optional[Dict[int, int]] = None) -> None:
         from geometry_msgs.msg import Pose, PoseArray, PoseStamped
         from nav_msgs.msg import Odometry
         from rosgraph_msgs.msg import Clock
@@ -85,6 +86,7 @@ class StateMessages:
         templates.append(clock)
         scans: List[Tuple[int, int]] = []  # (agent, lidar) in ranges order
         self.scan_max: List[np.ndarray] = []
+        self.scan_min: List[np.ndarray] = []  # -inf for a lidar without a range_min (no reading is below it)
         ranges_offset = 0
         ray_entity: List[np.ndarray] = []  # per ray, for the cloud: the agent's entity row and its body angle
         ray_angle: List[np.ndarray] = []
@@ -100,6 +102,11 @@ class StateMessages:
                 odom.f64 = self._pose_fields("pose.pose", k) + [
                     ("twist.twist.linear.x", t), ("twist.twist.linear.y", t + 1), ("twist.twist.angular.z", t + 2)]
                 templates += [pose, odom]
+                if goals and i in goals:
+                    goal = _Template(f"{name}/goal", PoseStamped(), stamps=["header.stamp"])
+                    goal.message.header.frame_id = frame_id
+                    goal.f64 = self._pose_fields("pose", goals[i])
+                    templates.append(goal)
             for j, geometry in enumerate(scan_geometry.get(i, [])):
                 n_rays = scan_rays[i][j]
                 if per_agent:
@@ -111,6 +118,8 @@ class StateMessages:
                     templates.append(scan)
                 ranges_offset += n_rays
                 self.scan_max.append(np.full(n_rays, geometry.range_max, dtype=np.float32))
+                self.scan_min.append(np.full(n_rays, geometry.range_min if geometry.range_min > 0 else -np.inf,
+                                             dtype=np.float32))
                 scans.append((i, j))
                 ray_entity.append(np.full(n_rays, k, dtype=np.intp))
                 ray_angle.append(geometry.angle_min + geometry.angle_increment * np.arange(n_rays, dtype=np.float64))
@@ -239,6 +248,8 @@ class StateMessages:
         self._idx_points = np.concatenate(idx_points) if idx_points else np.zeros(0, np.intp)
         self._idx_stamp = np.array(idx_stamp, dtype=np.intp).reshape(-1, 8)
         self._scan_max = np.concatenate(self.scan_max) if self.scan_max else np.zeros(0, np.float32)
+        self._scan_min = np.concatenate(self.scan_min) if self.scan_min else np.zeros(0, np.float32)
+        self._has_min = bool((self._scan_min > 0).any())  # else the -inf pass is skipped
         self._bytes = self.arena.tobytes()
         self._pending: Optional[tuple] = None  # (snapshot, stamp, colours) of a fill not yet written
 
@@ -269,7 +280,8 @@ class StateMessages:
         return out
 
     def ranges(self, snap: convert.Snapshot) -> np.ndarray:
-        """Every scan's ranges in publishing order, +inf where nothing was hit (REP 117), float32."""
+        """Every scan's ranges in publishing order, float32, as ``convert.fill_scan`` writes them (REP 117):
+        +inf where nothing was hit, -inf closer than a lidar's ``range_min``."""
         if not self.scan_order:
             return np.zeros(0, np.float32)
         if snap.rays is not self._rays_seen:  # the same dict every step: checked once
@@ -280,11 +292,14 @@ class StateMessages:
             ranges = snap.scan_block.astype(np.float32, copy=False)
         else:
             ranges = np.concatenate([snap.scans[i][j] for i, j in self.scan_order]).astype(np.float32, copy=False)
-        return np.where(ranges >= self._scan_max, np.float32(np.inf), ranges).astype(np.float32)
+        out = np.where(ranges >= self._scan_max, np.float32(np.inf), ranges)
+        if self._has_min:
+            out = np.where(ranges < self._scan_min, np.float32(-np.inf), out)
+        return out.astype(np.float32)
 
     def points(self, snap: convert.Snapshot, ranges: np.ndarray) -> np.ndarray:
         """``[R, 3]`` float32: where each ray hit, in the world frame (z 0); NaN for a ray that hit nothing
-        (``ranges`` +inf)."""
+        (``ranges`` +inf) or something closer than its lidar's ``range_min`` (-inf)."""
         k = self._ray_entity
         angle = snap.rot[k].astype(np.float64) + self._ray_angle
         hit = np.where(np.isfinite(ranges), ranges, np.nan).astype(np.float64)

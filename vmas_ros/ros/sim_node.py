@@ -4,7 +4,8 @@ It owns one vectorized environment, steps it on a timer and speaks standard
 messages for one chosen env of the batch (``env_index``):
 
 publishes  <agent>/pose (PoseStamped), <agent>/odom (Odometry), <agent>/scan
-           (LaserScan per lidar), agents/poses and landmarks/poses (PoseArray),
+           (LaserScan per lidar), <agent>/goal (PoseStamped, agents with a goal),
+           agents/poses and landmarks/poses (PoseArray),
            world/markers (MarkerArray), /clock, and /tf where tf2_msgs exists;
            <agent>/observation and <agent>/reward for learned policies (policy_io.py);
 subscribes <agent>/cmd_vel (Twist, or TwistStamped), body frame per REP 103,
@@ -35,7 +36,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 import vmas_ros
-from vmas_ros.ros import convert
+from vmas_ros.ros import convert, sim_setup
 from vmas_ros.ros.command import CommandGate, command_to_action
 from vmas_ros.ros.lifecycle import ConfigError, RecordingStopped
 from vmas_ros.ros.message_types import type_name
@@ -47,7 +48,6 @@ from vmas_ros.ros.topic_audit import QosAudit, TopicAudit, quiet_subscription_ev
 from vmas_ros.scenarios import make_heuristic
 from vmas_ros.simulator.compile_default import compile_by_default
 from vmas_ros.simulator.heuristic_policy import heuristic_actions
-from vmas_ros.simulator.sensors import CollidesWith, Lidar
 from vmas_ros.simulator.threads import limit_threads_for_small_batches
 
 from builtin_interfaces.msg import Time
@@ -76,7 +76,12 @@ class SimNode(StepLoop, Node):
 
     def __init__(self, **overrides) -> None:
         super().__init__("sim_node")
-        self.params = SIM_PARAMS.declare(self, SimParams, overrides, cross=("env_index", "control"))
+        # control: policy takes the scenario the policy names, unless one was given: rclpy's overrides of
+        # this node hold exactly what the command line and parameter files gave it (see sim_setup)
+        given = {name: parameter.value for name, parameter in getattr(self, "_parameter_overrides", {}).items()}
+        overrides = {**overrides, **sim_setup.parameters_from_policy(overrides, given, self.get_logger())}
+        self.params = SIM_PARAMS.declare(self, SimParams, overrides,
+                                         cross=("env_index", "control", "lidar_angle_max", "lidar_range_min"))
         SIM_PARAMS.log_refusals(self, lambda: self.params)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._build_env()
@@ -130,17 +135,11 @@ class SimNode(StepLoop, Node):
         except (ValueError, TypeError, MemoryError) as error:  # bad kwargs, or a world too large
             raise ConfigError(f"cannot build scenario {p.scenario!r}: {error}") from None
         world = self.env.world
-        if p.add_lidar:
-            for agent in world.agents:
-                if not any(isinstance(s, Lidar) for s in agent.sensors):
-                    agent.add_sensor(Lidar(
-                        world, n_rays=p.lidar_rays, max_range=p.lidar_range,
-                        entity_filter=CollidesWith(agent),
-                    ))
+        self.own_lidars = sim_setup.add_node_lidars(world, p)  # add_lidar, robot_lidar
         self.policy = make_heuristic(p.scenario, **p.kwargs())
         self.obs = self.env.reset()
         self._compile_physics(world, device)
-        self.lidars = convert.agent_lidars(world)
+        self.lidars = sim_setup.published_lidars(world, self.own_lidars)
         # how the published env is taken after each step is the engine's choice, made here once
         self.snapshot = convert.PublishedEnv(world, self.lidars)
 
@@ -172,7 +171,7 @@ class SimNode(StepLoop, Node):
     def _build_io(self) -> None:
         world = self.env.world
         self.agent_names = convert.unique_names([a.name for a in world.agents])
-        self.scan_geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in self.lidars.items()}
+        self.scan_geometry = sim_setup.scan_geometry(self.lidars, self.own_lidars, self.params.lidar_range_min)
         self.frame_prefix = self._frame_prefix()
         frame = self.world_frame = self.frame_prefix + self.params.frame_id
         # a swarm's agents go out in aggregated topics only; cmd_vel stays for the agents named
@@ -191,7 +190,8 @@ class SimNode(StepLoop, Node):
         self.state_messages = StateMessages(
             self.agent_names, len(world.landmarks), len(world.entities), self.scan_geometry,
             {i: [s.n_rays for s in ls] for i, ls in self.lidars.items()}, frame, self.markers,
-            per_agent=self.per_agent, cloud=not self.per_agent, frame_prefix=self.frame_prefix)
+            per_agent=self.per_agent, cloud=not self.per_agent, frame_prefix=self.frame_prefix,
+            goals=sim_setup.goal_rows(world, self.env.scenario))
         self._per_env_colours = [k for k, e in enumerate(world.entities) if isinstance(e.color, torch.Tensor)]
         if self._per_env_colours:
             self.state_messages.set_colour_fields(self._per_env_colours)
