@@ -94,8 +94,8 @@ class TestClosedLoop:
                 pause_seen = time.monotonic()
                 ros.spin_for(0.8)
                 assert not actions.since(pause_seen), "acted on observations older than observation_timeout"
-                ros.spin_until(lambda: "not acting on observations older than 0.5 s" in node.output(), 5,
-                               "the stale-observation warning")
+                stale = "no command for agent_0: agent_0/observation is older than observation_timeout (0.5 s)"
+                ros.spin_until(lambda: stale in node.output(), 5, "the stale-observation warning")
                 assert ros.call(SetBool, f"{NODE}/pause", SetBool.Request(data=False)).success
                 resumed = time.monotonic()
                 ros.spin_until(lambda: actions.since(resumed), 5, "actions once observations flow again")

@@ -15,6 +15,7 @@ import yaml
 
 from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_MAX_ENVS
 from vmas_ros.ros.param_table import Param, ParamTable
+from vmas_ros.ros.policy_commands import ACTION_KINDS, BASES
 
 CONTROL_MODES = ("zero", "heuristic", "policy")
 RECORD_ON_ERROR = ("continue", "stop")
@@ -308,10 +309,41 @@ POLICY_OUTPUTS = ("action", "cmd_vel")
 #: a policy runs at most this often (one ONNX call per tick); more is a unit mistake (ms for Hz)
 MAX_POLICY_RATE = 1000.0
 
+
+def _agent_template(name: str):
+    def check(value: str, current) -> Optional[str]:
+        if "{agent}" not in value:
+            return f"{name} must contain {{agent}} (each agent's name goes there), got {value!r}"
+        return None
+    return check
+
+
 POLICY_PARAMS = ParamTable("policy_node", [
     Param("policy_path", "", "exported policy: the .json or the .onnx of the pair; must exist",
           check=_policy_node_policy_path),
-    Param("output", "action", "action: <agent>/action; cmd_vel: <agent>/cmd_vel Twists", choices=POLICY_OUTPUTS),
+    Param("output", "action", "action: <agent>/action; cmd_vel: <agent>/cmd_vel velocity commands in the body frame",
+          choices=POLICY_OUTPUTS),
+    Param("use_stamped_cmd_vel", False, "output: cmd_vel publishes geometry_msgs/TwistStamped (what Jazzy's "
+          "diff_drive_controller takes) instead of Twist"),
+    Param("cmd_vel_frame_id", "{agent}/base_link", "header.frame_id of TwistStamped commands ({agent}: the agent's "
+          "name)", check=_agent_template("cmd_vel_frame_id")),
+    Param("action_kind", "auto", "what the policy's action means: world_velocity (rotated into the body frame by "
+          "the odometry's heading), body_velocity, speed_turn (linear.x, angular.z); auto: speed_turn for policies "
+          "trained with dynamics: diff_drive, else world_velocity", choices=ACTION_KINDS),
+    Param("base", "holonomic", "the robots' drive: holonomic (linear.x, linear.y, angular.z) or diff_drive "
+          "(linear.x, angular.z; a velocity is tracked with a point lookahead ahead of the wheel axis)",
+          choices=BASES),
+    Param("lookahead", 0.15, "diff_drive base: metres ahead of the wheel axis of the point that follows a "
+          "velocity action", runtime=True, minimum=0.0, strict=True),
+    Param("odom_topic", "{agent}/odom", "nav_msgs/Odometry of each robot, for its heading ({agent}: the agent's "
+          "name)", check=_agent_template("odom_topic")),
+    Param("max_linear_speed", 0.0, "limit on the length of (linear.x, linear.y), m/s", runtime=True, minimum=0.0,
+          note="(0: none)"),
+    Param("max_angular_speed", 0.0, "limit on |angular.z|, rad/s", runtime=True, minimum=0.0, note="(0: none)"),
+    Param("max_linear_accel", 0.0, "limit on the change of (linear.x, linear.y) per second, m/s^2", runtime=True,
+          minimum=0.0, note="(0: none)"),
+    Param("max_angular_accel", 0.0, "limit on the change of angular.z per second, rad/s^2", runtime=True,
+          minimum=0.0, note="(0: none)"),
     Param("rate_hz", 10.0, "policy steps per second", runtime=True, minimum=MIN_RATE, maximum=MAX_POLICY_RATE),
     Param("observation_timeout", 0.5, "seconds after which an input message is too old to act on", runtime=True,
           minimum=0.0, strict=True),
@@ -319,8 +351,8 @@ POLICY_PARAMS = ParamTable("policy_node", [
           "empty: each agent's <agent>/observation", check=_adapter),
     Param("adapter_kwargs", "{}", "JSON or YAML-flow mapping passed to the adapter",
           check=_mapping("adapter_kwargs", "'{\"scale\": 2}'")),
-    Param("cmd_vel_scale", 1.0, "metres per second per action unit for output: cmd_vel", runtime=True,
-          minimum=0.0, strict=True),
+    Param("cmd_vel_scale", 1.0, "multiplies every command of output: cmd_vel (metres per second per action unit "
+          "of a velocity action)", runtime=True, minimum=0.0, strict=True),
 ], doc="docs/policy_node.md#parameters")
 
 #: policy_node parameters that may change while it runs; the others need a restart

@@ -5,15 +5,19 @@ builds every agent's observation from ROS messages through an observation
 adapter (default: sim_node's ``<agent>/observation``), and publishes at
 ``rate_hz`` either ``<agent>/action`` (std_msgs/Float32MultiArray, the raw
 action vector sim_node takes) or, with ``output: cmd_vel``,
-``<agent>/cmd_vel`` (geometry_msgs/Twist: linear.x/y = ``cmd_vel_scale`` x
-the action's first two components, for velocity-controlled robots).
+``<agent>/cmd_vel``: a body-frame twist (REP 103) as geometry_msgs/Twist or,
+with ``use_stamped_cmd_vel``, TwistStamped (Jazzy's diff_drive_controller).
+How an action becomes a twist (rotation by the odometry's heading, a point
+ahead of a diff-drive base's wheel axis, limits) is in ``policy_commands.py``.
 
-An observation older than ``observation_timeout`` (wall-clock age since it
+An input older than ``observation_timeout`` (wall-clock age since it
 arrived) is not acted on: a robot whose sensors stopped must not keep
-receiving commands computed from the past. Agents without a usable
-observation get nothing (sim_node's ``cmd_vel_timeout`` then stops them), and
-a throttled warning names them. A publisher of the wrong message type on an
-input topic (which ROS never delivers) is named once in a warning, with the
+receiving commands computed from the past. An agent without a usable
+observation, or without fresh finite odometry when its command needs the
+heading, gets nothing (sim_node's ``cmd_vel_timeout``, or the robot's own
+command timeout, then stops it), and a throttled warning names the robot and
+what is wrong (``policy_inputs.py``). A publisher of the wrong message type on
+an input topic (which ROS never delivers) is named once in a warning, with the
 type expected (``topic_audit.py``, as sim_node does for its commands).
 """
 from __future__ import annotations
@@ -32,10 +36,13 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from vmas_ros.ros.adapters import load_adapter
+from vmas_ros.adapters import load_adapter
 from vmas_ros.ros.convert import unique_names
 from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.params import POLICY_PARAMS, PolicyNodeParams, run_checked
+from vmas_ros.ros.policy_commands import CommandLimiter, body_commands, needs_heading, resolve_action_kind
+from vmas_ros.ros.policy_inputs import AgentInputs
+from vmas_ros.ros.policy_outputs import ActionOutput, CmdVelOutput
 from vmas_ros.ros.topic_audit import TopicAudit
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -55,24 +62,53 @@ class PolicyNode(Node):
         self.agent_names = unique_names(self.policy.agents)
         try:
             self.adapter = load_adapter(self.params.adapter, self.agent_names, self.policy.observation_size,
-                                        self.params.kwargs())
+                                        self.params.kwargs(), self.policy.metadata.get("scenario_kwargs") or {})
             topics = dict(self.adapter.topics())
         except ValueError as error:
             raise ConfigError(f"adapter: {error}") from None
+        self.action_kind, why = resolve_action_kind(self.params.action_kind, self.policy.metadata)
+        odom_topics = None
+        if self.params.output == "cmd_vel" and needs_heading(self.action_kind):
+            from nav_msgs.msg import Odometry
+
+            odom_topics = [self.params.odom_topic.replace("{agent}", a) for a in self.agent_names]
+            for topic in odom_topics:
+                if topics.setdefault(topic, Odometry) is not Odometry:
+                    raise ConfigError(f"odom_topic: {topic} is read by the adapter as {topics[topic].__name__}, "
+                                      f"not nav_msgs/Odometry")
+        self.inputs = AgentInputs(self.agent_names, topics, odom_topics, lambda: self.params.observation_timeout)
         self.latest: Dict[str, Tuple[Any, float]] = {}  # topic -> (message, monotonic arrival)
         inputs = [self.create_subscription(msg_type, topic, lambda msg, t=topic: self._on_message(t, msg), ACCEPT_ANY)
                   for topic, msg_type in topics.items()]
         # a publisher of another type on an input never matches: ROS drops it silently, so name it
         self.topic_audit = TopicAudit.of_inputs(self, inputs, "policy_node")
-        self._build_outputs()
+        self.output = self._build_output()
+        self.limiter = CommandLimiter(len(self.agent_names), period=1.0 / self.params.rate_hz,
+                                      memory=max(self.params.observation_timeout, 2.0 / self.params.rate_hz))
+        self._set_limits()
         self._warned: Dict[str, float] = {}
+        self._started = time.monotonic()
         self.published = 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
         self.get_logger().info(
             f"policy_node: {self.policy!r} for {self.agent_names}, reading {sorted(topics)}, "
-            f"publishing <agent>/{self.params.output} at {self.params.rate_hz} Hz"
+            f"publishing {self.output.type_name} on <agent>/{self.output.topic} at {self.params.rate_hz} Hz"
+            + self._command_note(why)
         )
+
+    def _command_note(self, why: str) -> str:
+        if self.params.output != "cmd_vel":
+            return ""
+        p = self.params
+        frame = (f"world-frame velocity actions rotated into each robot's body frame by the heading in "
+                 f"{p.odom_topic.replace('{agent}', '<agent>')}" if self.action_kind == "world_velocity" else
+                 "actions already in the body frame" if self.action_kind == "body_velocity" else
+                 "(speed, turn rate) actions, already in the body frame")
+        base = (f"; diff-drive base: linear.x and angular.z, velocities tracked {p.lookahead} m ahead of the "
+                f"wheel axis" if p.base == "diff_drive" and self.action_kind != "speed_turn" else
+                f"; {p.base} base")
+        return f"; commands from {frame} ({self.action_kind}: {why}){base}, scaled by {p.cmd_vel_scale}"
 
     # ----------------------------------------------------------------- set-up
     def _load_policy(self):
@@ -83,27 +119,19 @@ class PolicyNode(Node):
         except Exception as error:  # JSON, checksum, onnxruntime: all mean "cannot use it"
             raise ConfigError(f"policy_path: cannot load {self.params.policy_path!r}: {error}") from None
 
-    def _build_outputs(self) -> None:
-        if self.params.output == "cmd_vel":
-            from geometry_msgs.msg import Twist
+    def _build_output(self):
+        p = self.params
+        if p.output == "action":
+            return ActionOutput(self, self.agent_names, self.policy.action_size, RELIABLE)
+        if self.policy.action_size < 2:
+            raise ConfigError(f"output: cmd_vel needs actions of >= 2 components, the policy has "
+                              f"{self.policy.action_size}")
+        frames = [p.cmd_vel_frame_id.replace("{agent}", a) for a in self.agent_names]
+        return CmdVelOutput(self, self.agent_names, RELIABLE, p.use_stamped_cmd_vel, frames)
 
-            if self.policy.action_size < 2:
-                raise ConfigError(f"output: cmd_vel needs actions of >= 2 components, the policy has "
-                                  f"{self.policy.action_size}")
-            self.messages = [Twist() for _ in self.agent_names]
-            self.publishers_ = [self.create_publisher(Twist, f"{n}/cmd_vel", RELIABLE) for n in self.agent_names]
-        else:
-            from std_msgs.msg import Float32MultiArray, MultiArrayDimension
-
-            size = self.policy.action_size
-            self.messages = []
-            for _ in self.agent_names:
-                msg = Float32MultiArray()
-                msg.layout.dim = [MultiArrayDimension(label="action", size=size, stride=size)]
-                msg.data = [0.0] * size
-                self.messages.append(msg)
-            self.publishers_ = [self.create_publisher(Float32MultiArray, f"{n}/action", RELIABLE)
-                                for n in self.agent_names]
+    def _set_limits(self) -> None:
+        for name in ("max_linear_speed", "max_angular_speed", "max_linear_accel", "max_angular_accel"):
+            setattr(self.limiter, name, getattr(self.params, name))
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         if reason := POLICY_PARAMS.refuse_change(parameters, self.params):
@@ -113,6 +141,8 @@ class PolicyNode(Node):
             if parameter.name == "rate_hz":
                 self._timer.cancel()
                 self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
+                self.limiter.period = 1.0 / self.params.rate_hz
+        self._set_limits()
         return SetParametersResult(successful=True)
 
     # ---------------------------------------------------------------- running
@@ -125,51 +155,40 @@ class PolicyNode(Node):
             self._warned[key] = now
             self.get_logger().warning(text)
 
-    def fresh_messages(self) -> Tuple[Dict[str, Any], List[str]]:
-        """Messages not older than ``observation_timeout``, and the topics that are stale."""
+    def fresh_messages(self) -> Dict[str, Any]:
+        """Messages not older than ``observation_timeout``."""
         now, limit = time.monotonic(), self.params.observation_timeout
-        fresh, stale = {}, []
-        for topic, (msg, received) in self.latest.items():
-            if now - received <= limit:
-                fresh[topic] = msg
-            else:
-                stale.append(topic)
-        return fresh, stale
+        return {topic: msg for topic, (msg, received) in self.latest.items() if now - received <= limit}
 
     def _tick(self) -> None:
         if not self.context.ok():
             return
-        fresh, stale = self.fresh_messages()
-        if stale:
-            self._warn("stale", f"not acting on observations older than {self.params.observation_timeout} s: "
-                                f"{', '.join(sorted(stale))}")
+        fresh = self.fresh_messages()
         obs = np.asarray(self.adapter.build(fresh), dtype=np.float32)
         expected = (len(self.agent_names), self.policy.observation_size)
         if obs.shape != expected:
             self._warn("shape", f"adapter built observations of shape {obs.shape}, expected {expected}")
             return
-        usable = np.isfinite(obs).all(axis=1)
-        if not usable.all():
-            missing = [n for n, ok in zip(self.agent_names, usable) if not ok]
-            self._warn("missing", f"no usable observation for {', '.join(missing)}: waiting for "
-                                  f"{', '.join(sorted(set(self.adapter.topics()) - set(fresh))) or 'valid data'}")
+        yaw = self.inputs.headings(fresh)
+        reasons = self.inputs.reasons(fresh, self.latest, np.isfinite(obs).all(axis=1), yaw,
+                                      getattr(self.adapter, "problems", None) or {}, self.count_publishers)
+        if reasons and time.monotonic() - self._started > WARN_PERIOD:  # let discovery finish before naming
+            for i, why in reasons.items():
+                self._warn(self.agent_names[i], f"no command for {self.agent_names[i]}: {why}")
+        usable = np.array([i not in reasons for i in range(len(self.agent_names))])
         if not usable.any():
             return
         actions = self.policy.act(np.where(usable[:, None], obs, 0.0)[None])[0]
-        self.publish(actions, usable)
+        self.publish(actions, usable, yaw)
 
-    def publish(self, actions: np.ndarray, usable: np.ndarray) -> None:
-        """One message per agent with a usable observation."""
-        scale = self.params.cmd_vel_scale
-        for i, ok in enumerate(usable):
-            if not ok:
-                continue
-            msg = self.messages[i]
-            if self.params.output == "cmd_vel":
-                msg.linear.x, msg.linear.y = float(actions[i, 0]) * scale, float(actions[i, 1]) * scale
-            else:
-                np.frombuffer(msg.data, dtype=np.float32)[:] = actions[i]
-            self.publishers_[i].publish(msg)
+    def publish(self, actions: np.ndarray, usable: np.ndarray, yaw: np.ndarray) -> None:
+        """One message per agent in ``usable`` ``[n]``, from its action ``[n, action_size]``."""
+        if self.params.output == "cmd_vel":
+            p = self.params
+            twist = body_commands(actions, yaw, self.action_kind, p.base, p.cmd_vel_scale, p.lookahead)
+            actions = self.limiter.limit(twist, usable, time.monotonic())
+        for i in np.flatnonzero(usable):
+            self.output.send(i, actions[i])
         self.published += 1
 
 
