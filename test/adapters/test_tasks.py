@@ -240,3 +240,12 @@ def test_the_policy_s_training_kwargs_decide_the_layout():
         load_adapter("navigation", agents, 20, {"n_lidar_rays": 12}, {"dynamics": "holonomic"})
     assert load_adapter("navigation", agents, 20, {"dynamics": "holonomic"}, {"dynamics": "diff_drive"}).dynamics \
         == "holonomic"
+
+
+def test_goals_and_landmarks_stand_while_sensors_go_stale():
+    agents = ["agent_0", "agent_1"]
+    assert load_adapter("navigation", agents, 18, {}).standing_topics() == {"agent_0/goal", "agent_1/goal"}
+    assert load_adapter("simple_spread", agents, 10, {"obs_agents": False}).standing_topics() == {"landmarks/poses"}
+    assert load_adapter("goal", agents[:1], 6, {}).standing_topics() == {"agent_0/goal"}
+    assert load_adapter("diff_drive", agents, 4, {}).standing_topics() == set()
+    assert load_adapter("", agents, 4, {}).standing_topics() == set()

@@ -68,13 +68,19 @@ def test_stamped_body_frame_commands_and_no_command_on_bad_data(ros, policy_node
             if healthy:
                 odom_pubs["agent_0"].publish(good)
             odom_pubs["agent_1"].publish(broken)
-            landmark_pub.publish(landmarks())
             ros.spin_for(0.05)
 
     with policy_node(policy_path=str(policy), adapter="vmas_ros.ros.adapters:SimpleSpreadAdapter",
                      adapter_kwargs=OWN_VIEW, output="cmd_vel", use_stamped_cmd_vel=True, rate_hz=20.0,
                      observation_timeout=0.5) as node:
         node.wait_publishing([f"/{a}/cmd_vel" for a in AGENTS])
+        # the landmarks come at the start only, as from a planner: they stand however old they get (the
+        # adapter's standing topic), while the odometry must stay fresh; a few copies, as discovery may
+        # still be matching the two ends when the first goes out
+        ros.spin_until(lambda: landmark_pub.get_subscription_count() > 0, 20.0, "policy_node's subscription")
+        for _ in range(3):
+            landmark_pub.publish(landmarks())
+            ros.spin_for(0.1)
         feed(20.0, until=lambda: len(commands["agent_0"]) >= 5)
         assert len(commands["agent_0"]) >= 5, node.describe()
         feed(3.0)

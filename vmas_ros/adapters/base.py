@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import abc
 import importlib
-from typing import Any, Dict, Mapping, Optional, Sequence
+from typing import Any, Dict, Mapping, Optional, Sequence, Set
 
 import numpy as np
 
@@ -53,7 +53,8 @@ class ObservationAdapter(abc.ABC):
 
     The contract with policy_node:
 
-    * ``topics()``: topic name -> message class of every topic ``build`` reads.
+    * ``topics()``: topic name -> message class of every topic ``build`` reads;
+      ``standing_topics()``: those whose last message never goes stale (goals).
     * ``build(latest)``: the observations ``[n_agents, observation_size]``
       (float32), one row per agent in ``agents`` order; a row that cannot be
       built is all NaN.
@@ -79,6 +80,16 @@ class ObservationAdapter(abc.ABC):
     @abc.abstractmethod
     def topics(self) -> Dict[str, type]:
         """Topic name -> message class of every topic ``build`` reads."""
+
+    def standing_topics(self) -> Set[str]:
+        """Topics whose last message stands until a new one replaces it (goals, landmarks), of ``topics()``.
+
+        A sensor stream (odometry, scans) is too old to act on after
+        ``observation_timeout``; a goal is not: a planner may send it once, or
+        at a slow rate. policy_node passes a standing topic's last message to
+        ``build`` whatever its age. None by default.
+        """
+        return set()
 
     @abc.abstractmethod
     def build(self, latest: Mapping[str, Any]) -> np.ndarray:

@@ -16,7 +16,7 @@ built is NaN and ``problems[agent]`` says why (see ``base.ObservationAdapter``).
 from __future__ import annotations
 
 import numbers
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Set
 
 import numpy as np
 
@@ -107,6 +107,10 @@ class GoalAdapter(_OdometryAdapter):
 
         return {**super().topics(), **{topic: PoseStamped for topic in self.goal_topics}}
 
+    def standing_topics(self) -> Set[str]:
+        """The goals: a planner may send them once."""
+        return set(self.goal_topics)
+
     def build(self, latest: Mapping[str, Any]) -> np.ndarray:
         obs, self.problems = self.empty(), {}
         for i, state in enumerate(self._states(latest)):
@@ -152,6 +156,10 @@ class SimpleSpreadAdapter(_OdometryAdapter):
         from geometry_msgs.msg import PoseArray
 
         return {**super().topics(), self.landmarks_topic: PoseArray}
+
+    def standing_topics(self) -> Set[str]:
+        """The landmarks: they stand where they were last reported."""
+        return {self.landmarks_topic}
 
     def build(self, latest: Mapping[str, Any]) -> np.ndarray:
         obs, self.problems = self.empty(), {}
@@ -254,6 +262,10 @@ class NavigationAdapter(_OdometryAdapter):
         if self.resampler is not None:
             found.update({topic: LaserScan for topic in self.scan_topics})
         return found
+
+    def standing_topics(self) -> Set[str]:
+        """The goals: a planner may send them once."""
+        return set(self.goal_topics)
 
     def build(self, latest: Mapping[str, Any]) -> np.ndarray:
         obs, self.problems = self.empty(), {}

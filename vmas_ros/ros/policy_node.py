@@ -76,6 +76,8 @@ class PolicyNode(Node):
                 if topics.setdefault(topic, Odometry) is not Odometry:
                     raise ConfigError(f"odom_topic: {topic} is read by the adapter as {topics[topic].__name__}, "
                                       f"not nav_msgs/Odometry")
+        #: topics whose last message stands until replaced (goals): never too old to act on
+        self.standing = set(getattr(self.adapter, "standing_topics", lambda: ())())
         self.inputs = AgentInputs(self.agent_names, topics, odom_topics, lambda: self.params.observation_timeout)
         self.latest: Dict[str, Tuple[Any, float]] = {}  # topic -> (message, monotonic arrival)
         inputs = [self.create_subscription(msg_type, topic, lambda msg, t=topic: self._on_message(t, msg), ACCEPT_ANY)
@@ -156,9 +158,10 @@ class PolicyNode(Node):
             self.get_logger().warning(text)
 
     def fresh_messages(self) -> Dict[str, Any]:
-        """Messages not older than ``observation_timeout``."""
+        """Messages not older than ``observation_timeout``, and the last one of each standing topic (goals)."""
         now, limit = time.monotonic(), self.params.observation_timeout
-        return {topic: msg for topic, (msg, received) in self.latest.items() if now - received <= limit}
+        return {topic: msg for topic, (msg, received) in self.latest.items()
+                if now - received <= limit or topic in self.standing}
 
     def _tick(self) -> None:
         if not self.context.ok():
