@@ -10,6 +10,7 @@ Subcommands:
     render  roll out a scenario and save it as a GIF, MP4 or PNG
     train   train a policy with CPPO, MAPPO, IPPO or HetIPPO (TorchRL PPO); exports it to ONNX
     export  export a training checkpoint's (or a BenchMARL run's) policy as <stem>.onnx + <stem>.json
+    deploy-eval  an exported policy in the engine and on robot_fleet from the same starts, side by side
     train-suite  the paper's Figure 3: every algorithm on every scenario (and seed), one plot per
             scenario against its heuristic, a 2x2 figure, CSV and Markdown summary
     sim     start sim_node (the ROS 2 node) without ``ros2 launch``
@@ -224,6 +225,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "and plot them against the heuristics", add_train_suite_arguments, run_train_suite_command)
     _add_delegated(sub, "export", "export a training checkpoint or a BenchMARL run as <stem>.onnx + <stem>.json",
                    add_export_arguments, run_export_command)
+    from vmas_ros.deploy import cli as deploy_cli
+
+    _add_delegated(sub, "deploy-eval", "a policy in the engine and on robot_fleet (through policy_node) from the "
+                   "same start states, side by side", deploy_cli.add_arguments, deploy_cli.run)
     render = sub.add_parser("render", help="save a rollout as .gif/.mp4/.png (headless)")
     _add_rollout_arguments(render)
     render.add_argument("--out", required=True, help="output file: .gif, .mp4 (needs imageio-ffmpeg) or .png (last frame)")

@@ -1,0 +1,184 @@
+"""``vmas-ros deploy-eval``: one exported policy, the same start states, in the engine and on ``robot_fleet``.
+
+The engine side runs the policy batched over the episodes
+(:mod:`~vmas_ros.deploy.engine_side`); the fleet side replays each start on
+``robot_fleet`` (numpy robots with latency, lag and noise, not the engine)
+through ``policy_node`` with an adapter and body-frame cmd_vel, as on robots
+(:mod:`~vmas_ros.deploy.fleet_side`). The output folder gets ``engine.json``,
+``fleet_summary.json``, ``report.json``, ``report.md``, ``comparison.png``
+and both nodes' logs. See docs/deploy.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shlex
+import sys
+from pathlib import Path
+from typing import Any, Dict, List
+
+import numpy as np
+import yaml
+
+#: scenario -> the shipped adapter that rebuilds its observation (vmas_ros.adapters.ADAPTER_NAMES)
+ADAPTER_OF = {"simple_spread": "simple_spread", "navigation": "navigation", "diff_drive": "diff_drive",
+              "goal": "goal"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--policy", required=True, help="exported policy (.json beside its .onnx)")
+    parser.add_argument("--seeds", default="0..4", help="env seeds: '0..4' or '0,3,7' (default 0..4)")
+    parser.add_argument("--episodes-per-seed", type=int, default=1, help="episodes (envs) per seed (default 1)")
+    parser.add_argument("--seconds", type=float, default=15.0, help="length of every episode, s (default 15)")
+    parser.add_argument("--drive", choices=("holonomic", "diff_drive"), default="holonomic",
+                        help="the fleet's robots, and policy_node's base (default holonomic)")
+    parser.add_argument("--twist", action="store_true",
+                        help="commands as geometry_msgs/Twist (default: TwistStamped, as Jazzy's diff_drive_controller)")
+    parser.add_argument("--cmd-vel-scale", default="auto",
+                        help="policy_node's cmd_vel_scale; auto: the speed a held action settles at in the engine "
+                             "(dt / (mass x drag) for force-driven agents, 1 for velocity commands)")
+    parser.add_argument("--latency", type=float, default=0.05, help="fleet command latency, s (default 0.05)")
+    parser.add_argument("--lag", type=float, default=0.1, help="fleet velocity lag time constant, s (default 0.1)")
+    parser.add_argument("--odom-noise", default="0.01,0.01,0.02",
+                        help="fleet odometry noise sigmas: position m, yaw rad, velocity m/s (default 0.01,0.01,0.02)")
+    parser.add_argument("--headings", choices=("auto", "engine", "random"), default="auto",
+                        help="fleet start headings: engine's, or random; auto: engine's where the agents turn, "
+                             "random where they never do (default auto)")
+    parser.add_argument("--fleet-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="another robot_fleet parameter (repeatable)")
+    parser.add_argument("--policy-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="another policy_node parameter (repeatable), e.g. lookahead:=0.2")
+    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def parse_seeds(text: str) -> List[int]:
+    """``'0..4'`` -> [0, 1, 2, 3, 4]; ``'0,3,7'`` -> [0, 3, 7]."""
+    try:
+        if ".." in text:
+            first, last = (int(part) for part in text.split(".."))
+            seeds = list(range(first, last + 1))
+        else:
+            seeds = [int(part) for part in text.split(",")]
+    except ValueError:
+        raise ValueError(f"--seeds must look like '0..4' or '0,3,7', got {text!r}") from None
+    if not seeds or min(seeds) < 0:
+        raise ValueError(f"--seeds must name at least one seed >= 0, got {text!r}")
+    return seeds
+
+
+def parse_params(items: List[str], option: str) -> Dict[str, Any]:
+    """``['name:=value', ...]`` with YAML values."""
+    found = {}
+    for item in items:
+        name, sep, value = item.partition(":=")
+        if not sep or not name:
+            raise ValueError(f"{option} must be NAME:=VALUE, got {item!r}")
+        found[name] = yaml.safe_load(value)
+    return found
+
+
+def held_action_speed(scenario: str, kwargs: Dict[str, Any]) -> float:
+    """m/s per action unit the scenario's first agent settles at when an action is held (see --cmd-vel-scale)."""
+    import vmas_ros
+    from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
+
+    env = vmas_ros.make_env(scenario, num_envs=1, **kwargs)
+    agent, world = env.world.agents[0], env.world
+    if isinstance(agent.dynamics, DiffDrive) or hasattr(agent, "controller"):
+        return 1.0
+    drag = world.drag if agent.drag is None else agent.drag
+    multiplier = float(np.asarray(agent.action.u_multiplier_tensor.cpu()).ravel()[0])
+    return multiplier * world.dt / (agent.mass * drag) if drag > 0 else 1.0
+
+
+def fleet_starts(starts: List[dict], mode: str, rng: np.random.Generator) -> List[dict]:
+    """The engine's starts with the fleet's headings (``--headings``)."""
+    turning = any(abs(row[2]) > 1e-9 for start in starts for row in start["robots"])
+    random = mode == "random" or (mode == "auto" and not turning)
+    out = []
+    for start in starts:
+        robots = [list(row) for row in start["robots"]]
+        if random:
+            for row in robots:
+                row[2] = float(rng.uniform(-math.pi, math.pi))
+        out.append({"robots": robots, "goals": start["goals"]})
+    return out
+
+
+def _own_arguments() -> List[str]:
+    """This command's arguments as typed (after ``deploy-eval``), for the report's heading."""
+    argv = sys.argv[1:]
+    return argv[argv.index("deploy-eval") + 1:] if "deploy-eval" in argv else argv
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        return _run(args)
+    except (ValueError, RuntimeError) as error:
+        print(f"vmas-ros deploy-eval: {error}", file=sys.stderr)
+        return 2 if isinstance(error, ValueError) else 1
+
+
+def _run(args: argparse.Namespace) -> int:
+    from vmas_ros.deploy import engine_side, fleet_side, report
+    from vmas_ros.policy.onnx_policy import OnnxPolicy
+
+    seeds = parse_seeds(args.seeds)
+    fleet_extra, policy_extra = parse_params(args.fleet_param, "--fleet-param"), parse_params(args.policy_param,
+                                                                                               "--policy-param")
+    noise = [float(v) for v in args.odom_noise.split(",")]
+    if len(noise) != 3 or min(noise) < 0:
+        raise ValueError(f"--odom-noise must be three sigmas >= 0 (position, yaw, velocity), got {args.odom_noise!r}")
+    if args.episodes_per_seed < 1 or args.seconds <= 0:
+        raise ValueError(f"--episodes-per-seed must be >= 1 and --seconds > 0, got {args.episodes_per_seed} and "
+                         f"{args.seconds}")
+    try:
+        policy = OnnxPolicy.load(args.policy)
+    except Exception as error:  # the loader's errors (JSON, checksum, ONNX) all mean "unusable"
+        raise ValueError(f"--policy {args.policy!r} cannot be loaded: {error}") from None
+    scenario, kwargs = policy.metadata["scenario"], dict(policy.metadata["scenario_kwargs"])
+    adapter = ADAPTER_OF.get(scenario)
+    if adapter is None and "adapter" not in policy_extra:
+        raise ValueError(f"no shipped adapter for scenario {scenario!r} (shipped: {', '.join(ADAPTER_OF)}); "
+                         f"give one with --policy-param adapter:=package.module:Class")
+    scale = held_action_speed(scenario, kwargs) if args.cmd_vel_scale == "auto" else float(args.cmd_vel_scale)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    engine = {"episodes": [], "starts": []}
+    labels = []
+    for seed in seeds:
+        part = engine_side.engine_episodes(policy, scenario, kwargs, args.episodes_per_seed, seed, args.seconds)
+        engine.update({k: v for k, v in part.items() if k not in ("episodes", "starts")})
+        engine["episodes"] += part["episodes"]
+        engine["starts"] += part["starts"]
+        labels += [f"seed {seed} env {e['env_index']}" for e in part["episodes"]]
+    (out / "engine.json").write_text(json.dumps(engine, indent=1))
+
+    fleet_params = {"n_robots": len(policy.agents), "robot_names": ",".join(policy.agents),
+                    "robot_radius": engine["radius"], "goal_radius": engine["goal_radius"], "drive": args.drive,
+                    "use_stamped_cmd_vel": not args.twist, "command_latency": args.latency,
+                    "velocity_lag": args.lag, "odom_noise_position": noise[0], "odom_noise_yaw": noise[1],
+                    "odom_noise_velocity": noise[2], "seed": seeds[0], **fleet_extra}
+    policy_params = {"policy_path": str(Path(args.policy).resolve()), "adapter": adapter or "",
+                     "output": "cmd_vel", "use_stamped_cmd_vel": not args.twist, "base": args.drive,
+                     "cmd_vel_scale": scale, "rate_hz": 1.0 / engine["dt"], **policy_extra}
+    starts = fleet_starts(engine["starts"], args.headings, np.random.default_rng(seeds[0]))
+    summary = fleet_side.fleet_episodes(out, starts, args.seconds, fleet_params, policy_params,
+                                        progress=not args.quiet)
+
+    rows = report.pair_episodes(engine, summary, labels)
+    found = report.totals(rows, engine["per_robot_goals"])
+    heading = {"policy": args.policy, "scenario": scenario, "scenario_kwargs": json.dumps(kwargs),
+               "command": "vmas-ros deploy-eval " + " ".join(shlex.quote(a) for a in _own_arguments()),
+               "fleet": summary["parameters"],
+               "policy_node": ", ".join(f"{k} {v}" for k, v in policy_params.items() if k != "policy_path")}
+    (out / "report.json").write_text(json.dumps({"heading": heading, "rows": rows, "totals": found}, indent=1))
+    text = report.markdown(rows, found, engine["per_robot_goals"], heading)
+    (out / "report.md").write_text(text)
+    report.plot(rows, engine["per_robot_goals"], out / "comparison.png",
+                f"{scenario}: engine vs robot_fleet ({args.drive}, latency {args.latency} s, lag {args.lag} s)")
+    print(text)
+    return 0
