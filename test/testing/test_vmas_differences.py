@@ -40,6 +40,8 @@ def test_with_the_default_kwargs_three_scenarios_differ_by_design():
     ("joint_passage_size", {"collision_reward": -1.0}, "counts the walls for the last body only"),
     ("joint_passage_size", {"pos_shaping_factor": 1}, None),
     ("simple_spread", {"n_agents": 2}, None),
+    ("navigation", {"dynamics": "diff_drive"}, "VMAS's navigation has holonomic agents only"),
+    ("navigation", {"dynamics": "holonomic", "n_agents": 2}, None),
 ])
 def test_a_difference_applies_only_under_the_kwargs_that_cause_it(name, kwargs, found):
     reason = design_difference(name, kwargs)

@@ -61,6 +61,11 @@ DESIGN_DIFFERENCES: Dict[str, Tuple[DesignDifference, ...]] = {
         lambda kwargs: bool(kwargs["ai_red_agents"] or kwargs["ai_blue_agents"]),
     ),),
     "joint_passage": (_ANGLE_NOISE,),
+    "navigation": (DesignDifference(
+        "dynamics='diff_drive' is ours (VMAS's navigation has holonomic agents only): differential-drive agents "
+        "with a heading in the observation; the default dynamics='holonomic' compares",
+        lambda kwargs: kwargs["dynamics"] != "holonomic",
+    ),),
     "joint_passage_size": (
         _ANGLE_NOISE,
         DesignDifference(
