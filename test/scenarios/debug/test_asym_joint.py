@@ -60,7 +60,10 @@ def test_spaces_match_upstream(mode):
 def test_matches_upstream_vmas(kwargs, keep_upstream_rng):  # noqa: F811
     up, ours = harness.make_upstream(NAME, 6, **kwargs), make(6, **kwargs)
     harness.copy_start(up, ours, vmas_states.asym_joint)
-    seen = run_lockstep(up, ours, seed=0, actions=lockstep_actions(up, ours, sync_noise=True), steps=30)
+    # a stiff joint amplifies a one-ulp difference (the CPU's vector maths) past the tolerance in a few steps:
+    # each step starts from VMAS's state (run_lockstep's resync), which compares the physics, not the rounding
+    seen = run_lockstep(up, ours, seed=0, actions=lockstep_actions(up, ours, sync_noise=True), steps=30,
+                        resync=True)
     assert seen.largest_reward > 0.1 and seen.fastest > 0.1
 
 
