@@ -49,8 +49,9 @@ def policy_params(tmp_path_factory):
             "cmd_vel_scale": 0.4, "rate_hz": 10.0}
 
 
-def goal_distances(ros, timeout: float = 25.0) -> tuple:
-    """(first, closest) distance of each agent to its goal while it drives, from the true poses."""
+def goal_distances(ros, start=None, timeout: float = 25.0) -> tuple:
+    """(first, closest) distance of each agent to its goal while it drives, from the true poses; ``first``
+    from the ``start`` positions ``[n, 2]`` when given (the robots may be moving before the goals arrive)."""
     poses = ros.collect(PoseArray, "/agents/poses")
     goals = {a: ros.collect(PoseStamped, f"/{a}/goal") for a in AGENTS}
     try:
@@ -62,7 +63,7 @@ def goal_distances(ros, timeout: float = 25.0) -> tuple:
         def distances():
             return np.linalg.norm(np.array([[p.position.x, p.position.y] for p in poses.latest.poses]) - target, axis=1)
 
-        first = distances()
+        first = distances() if start is None else np.linalg.norm(np.asarray(start) - target, axis=1)
 
         def closer():
             now = distances()
@@ -102,7 +103,7 @@ def test_one_policy_node_command_drives_sim_node_s_robot_profile_and_robot_fleet
         fleet.wait_fleet(AGENTS)
         with processes(kind="policy", **policy_params) as node:
             node.wait_publishing([f"/{a}/cmd_vel" for a in AGENTS])
-            first, closest = goal_distances(ros)
+            first, closest = goal_distances(ros, start=[row[:2] for row in start["robots"]])
     assert (first > 1.0).all() and (closest < 0.5 * first).all()
     # robot 0 faces 2 rad and its goal lies along +x: the body-frame command points well away from body x
     heading = np.arctan2(commands.messages[0].twist.linear.y, commands.messages[0].twist.linear.x)
