@@ -26,8 +26,8 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     if with_benchmark_name:
         parser.add_argument("benchmark", nargs="?", default="mpe",
                             help="which benchmark: mpe (default; the VMAS paper's Fig. 2), suite (vmas_ros "
-                                 "against VMAS on the project's workloads) or node (sim_node's steps/s while "
-                                 "publishing)")
+                                 "against VMAS on the project's workloads), node (sim_node's steps/s while "
+                                 "publishing) or process (whole short scripts against VMAS: time and memory)")
     # dest is not ``num_envs``: cli.main compares args.num_envs with an int
     parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=list(DEFAULT_NUM_ENVS),
                         metavar="N", help="mpe: numbers of parallel envs (default: 1 10 100 1000)")
@@ -67,6 +67,14 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
                             "timed side by side (default: default; memory_30k is eager outside the default mode)")
     suite.add_argument("--compile-physics", action="store_true",
                        help="suite: the same as --modes compiled (kept for older commands)")
+    process = parser.add_argument_group("process options (vmas-ros bench process)")
+    process.add_argument("--process-workloads", nargs="+", default=None, metavar="SCENARIO_ENVS",
+                         help="process: <scenario>_<num_envs> (default: transport_32 navigation_60)")
+    process.add_argument("--process-steps", type=int, nargs="+", default=None, metavar="N",
+                         help="process: steps per process (default: 100 1000 10000)")
+    process.add_argument("--process-mode", default="default", metavar="MODE",
+                         help="process: vmas_ros as make_env builds it without flags (default), or eager, "
+                              "or compiled")
     from vmas_ros.bench.node import add_node_bench_arguments
 
     add_node_bench_arguments(parser)
@@ -78,6 +86,23 @@ def parse_bench_args(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="vmas-ros bench")
     add_bench_arguments(parser)
     return parser.parse_args(argv)
+
+
+def _run_process(args: argparse.Namespace) -> int:
+    """``vmas-ros bench process``: whole processes of vmas_ros and VMAS, alternating (:mod:`vmas_ros.bench.process`)."""
+    from vmas_ros.bench import process
+
+    try:
+        rows = process.run_process_benchmark(
+            args.process_workloads or process.DEFAULT_WORKLOADS, args.process_steps or process.DEFAULT_STEPS,
+            args.repeats, mode=args.process_mode, threads=args.threads, progress=not args.no_progress)
+    except ValueError as error:
+        print(f"vmas-ros bench process: {error}", file=sys.stderr)
+        return 2
+    print(process.format_table(rows))
+    for path in process.write_results(rows, args.out).values():
+        print(f"wrote {path}")
+    return 0
 
 
 def run_bench_command(args: argparse.Namespace) -> int:
@@ -97,6 +122,8 @@ def run_bench_command(args: argparse.Namespace) -> int:
         from vmas_ros.bench.suite import run_suite_command
 
         return run_suite_command(args)
+    if benchmark == "process":
+        return _run_process(args)
     num_envs = getattr(args, "bench_num_envs", None)
     if num_envs is None:
         num_envs = getattr(args, "num_envs", [1, 10, 100, 1000])

@@ -16,7 +16,7 @@ _PEER_INSTALL = {"vmas": "pip install vmas==1.5.2", "mpe": "pip install mpe2"}
 #: next to the eager "vmas_ros" side by ``--modes eager compiled``; not one of SIDES (bench mpe has no such side)
 COMPILED_SIDE = "vmas_ros_compiled"
 _LABEL = {"vmas_ros": "vmas_ros", "vmas": "VMAS", "mpe": "MPE", COMPILED_SIDE: "vmas_ros compiled"}
-BENCHMARKS = ("mpe", "suite", "node")
+BENCHMARKS = ("mpe", "suite", "node", "process")
 
 CSV_COLUMNS = [
     "run_id", "scenario", "side", "device", "num_envs", "steps", "repeats", "median_s", "min_s", "max_s",
