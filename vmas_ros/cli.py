@@ -82,7 +82,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     policy = make_heuristic(args.scenario, **kwargs)
     print(f"scenario {args.scenario}: {env.n_agents} agents, {len(env.world.landmarks)} landmarks, "
           f"{args.num_envs} envs on {env.device}, {args.steps} steps")
-    if env.world.physics_compiled:  # the default mode: compile before timing, and say why the wait
+    if env.world.physics_compiled:  # compiled from the first step (VMAS_ROS_COMPILE=1): compile before timing
         print("compiling the physics step with torch.compile (once; VMAS_ROS_COMPILE=0 runs eagerly) ...",
               flush=True)
         start = time.perf_counter()

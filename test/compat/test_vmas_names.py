@@ -19,8 +19,8 @@ _ENGINE = "engine internals: our world is struct-of-arrays, entities are views i
 _INTEGRATORS = "the dynamics integrate in their own private helpers, not these public methods"
 _ROWS = [  # (VMAS module, top-level names, reason): deliberate differences; "*" covers a whole module
     ("vmas.interactive_rendering", "*", "keyboard player is ours (pygame, not pyglet); render_interactively adds steps/fps"),
-    ("vmas.make_env", "make_env", "ours adds compile_physics (compiled by default where a compiler works; "
-                                  "False for bit parity) and gives num_envs a default of 32"),
+    ("vmas.make_env", "make_env", "ours adds compile_physics (by default eager, then compiled once a run is "
+                                  "long; False for bit parity) and gives num_envs a default of 32"),
     ("vmas.make_env", "BaseScenario Environment Wrapper", _IMPORTED),
     ("vmas.simulator.core", "Action AgentState EntityState",
      "state and action objects are views into the world's batched tensors; the world moves them (World.to)"),

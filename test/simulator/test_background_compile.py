@@ -1,9 +1,10 @@
 """Compiling on a thread of its own (World.compile_physics(background=True), sim_node's default).
 
-The world steps eagerly, never waiting, until each compiled function is
-ready, then runs it compiled from its next call. These tests pin what the
-switch may and may not change: nothing before it, float rounding after it,
-and the same trajectory for the same switch step.
+The world steps eagerly, never waiting, until its compiled functions are
+ready, then runs them compiled from its next step on, all at once. These tests
+pin what the switch may and may not change: nothing before it, float rounding
+after it, and the same trajectory for the same switch step, whether the
+switch came from the background compile or was planned (the default mode's).
 """
 from __future__ import annotations
 
@@ -27,12 +28,15 @@ def _state(env) -> torch.Tensor:
     return torch.cat([env.world.stacked_state(f).flatten() for f in ("pos", "vel", "rot", "ang_vel")])
 
 
-def _run(actions, background: bool, switch_at: int):
+def _run(actions, background: bool, switch_at: int, planned: bool = False):
     """transport (sphere and box contacts), stepped with ``actions``; with ``background`` its compile is
-    waited for after ``switch_at`` steps, so that the compiled step takes over from the next one."""
+    waited for after ``switch_at`` steps, so that the compiled step takes over from the next one; with
+    ``planned``, the switch is planned at that step (``compile_physics(after_steps=...)``)."""
     env = vmas_ros.make_env("transport", num_envs=NUM_ENVS, seed=7, compile_physics=False)
     if background:
         env.world.compile_physics(background=True)
+    if planned:
+        env.world.compile_physics(after_steps=switch_at)
     states, observations = [], []
     for index, step_actions in enumerate(actions):
         if background and index == switch_at:
@@ -57,6 +61,7 @@ def test_the_switch_changes_nothing_before_it_and_only_rounding_after_and_is_rep
     assert counters["stats"]["unique_graphs"] > graphs  # compiled code was made (and is what ran after the switch)
     copies = list(env.world._compiled.step._copies.values())
     assert copies and not any(copy._eager_until_compiled for copy in copies) and all(c.one_graph for c in copies)
+    assert compiler.released and env.world.compiled_from_step == STEPS_BEFORE
     # until the switch the world ran its eager functions: the eager world's steps, bit for bit
     assert torch.equal(states[:STEPS_BEFORE], eager_states[:STEPS_BEFORE])
     assert torch.equal(obs[:STEPS_BEFORE], eager_obs[:STEPS_BEFORE])
@@ -65,8 +70,10 @@ def test_the_switch_changes_nothing_before_it_and_only_rounding_after_and_is_rep
     # (transport's rewards are differences of distances: one rounding of a distance is the whole reward's)
     torch.testing.assert_close(obs, eager_obs, atol=1e-4, rtol=1e-4)
     assert (eager_states[-1] - eager_states[0]).abs().max() > 1e-3  # the world moved
-    # a seeded run that switches at the same step agrees bit for bit: the switch adds no state of its own
-    _, again, again_obs = _run(actions, background=True, switch_at=STEPS_BEFORE)
+    # a seeded run that switches at the same step agrees bit for bit, also when the switch is planned (the
+    # default mode's, and how a node's logged switch step is repeated offline): the switch adds no state
+    planned, again, again_obs = _run(actions, background=False, switch_at=STEPS_BEFORE, planned=True)
+    assert planned.world.compiled_from_step == STEPS_BEFORE and planned.world.physics_compiled
     assert torch.equal(again, states) and torch.equal(again_obs, obs)
 
 

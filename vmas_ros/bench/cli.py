@@ -8,9 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from vmas_ros.bench.common import BENCHMARKS
 from vmas_ros.bench.report import plot_available
-from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_MAX_ENVS
+from vmas_ros.bench.common import BENCHMARKS, DEFAULT_MODE_WARMUP_MAX_STEPS
 
 __all__ = ["add_bench_arguments", "parse_bench_args", "run_bench_command"]
 
@@ -61,8 +60,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
                             "navigation swarms); above, omitted (default 100)")
     # no argparse choices: a bad mode exits 2 with the suite's own message, like its other options
     suite.add_argument("--modes", nargs="+", default=None, metavar="MODE",
-                       help="suite: how vmas_ros is stepped: default (as make_env builds it without flags: "
-                            f"compiled where a C++ compiler works, up to {DEFAULT_COMPILE_MAX_ENVS:,} envs), eager, compiled (physics "
+                       help="suite: how vmas_ros is stepped: default (as make_env builds it without flags, its long "
+                            "run: the warm-up steps on through the default mode's switch to the compiled step when "
+                            f"that comes within {DEFAULT_MODE_WARMUP_MAX_STEPS:,} steps), eager, compiled (physics "
                             "through torch.compile, compiled during the warm-up runs) or eager and compiled, "
                             "timed side by side (default: default; memory_30k is eager outside the default mode)")
     suite.add_argument("--compile-physics", action="store_true",

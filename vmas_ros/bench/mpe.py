@@ -31,7 +31,7 @@ import importlib
 import os
 import statistics
 import sys
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -63,7 +63,7 @@ from vmas_ros.bench.report import (  # noqa: F401 - re-exported
     machine_info,
     write_results,
 )
-from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
+from vmas_ros.bench.timing import Case, Timing, pinned_threads, through_the_switch, time_alternating
 
 __all__ = [
     "SIDES",
@@ -139,12 +139,15 @@ def _validate(num_envs, steps, repeats, devices, peers, mpe_max_envs, threads, w
 
 
 # -------------------------------------------------------------------- sides
-def _vmas_case(side: str, num_envs: int, device: str, steps: int, compile_physics: bool = False) -> Case:
+def _vmas_case(side: str, num_envs: int, device: str, steps: int, compile_physics: Optional[bool] = False,
+               on_switch: Optional[Callable[[bool], object]] = None) -> Case:
+    """VMAS's or vmas_ros's simple_spread; for vmas_ros ``compile_physics`` None is the default mode, whose
+    warm-up runs on through its switch to the compiled step (``on_switch(compiled)`` says how it ended)."""
     if side == "vmas_ros":
         import vmas_ros
 
         make = vmas_ros.make_env
-        extra = {"compile_physics": bool(compile_physics)}
+        extra = {} if compile_physics is None else {"compile_physics": bool(compile_physics)}
     else:
         import vmas
 
@@ -157,6 +160,9 @@ def _vmas_case(side: str, num_envs: int, device: str, steps: int, compile_physic
         for action in actions:
             env.step(action)
 
+    if side == "vmas_ros" and compile_physics is None:
+        return Case(run=run, setup=env.reset, device=device,
+                    warmup_run=through_the_switch(env, run, actions, on_switch or (lambda compiled: None)))
     return Case(run=run, setup=env.reset, device=device)
 
 

@@ -59,6 +59,8 @@ from vmas_ros.bench import mpe as _mpe
 from vmas_ros.bench.common import COMPILED_SIDE
 from vmas_ros.bench.report import plot_available
 from vmas_ros.bench.suite_cases import SPHERE_SPACING, SWARM_SPACING
+from vmas_ros.bench.suite_cases import record_timed_mode
+from vmas_ros.simulator.compile_default import resolve_compile
 from vmas_ros.bench.suite_cases import env_cases as _env_cases
 from vmas_ros.bench.suite_cases import memory_run as _memory_run
 from vmas_ros.bench.suite_cases import spheres_case as _spheres_case
@@ -68,7 +70,6 @@ from vmas_ros.bench.suite_report import (
     write_suite_results,
 )
 from vmas_ros.bench.timing import Case, Timing, pinned_threads, time_alternating
-from vmas_ros.simulator.compile_default import compile_by_default
 
 __all__ = ["MODES", "WORKLOADS", "Workload", "navigation_swarm", "plan_suite", "resolve_modes", "run_suite",
            "run_suite_command", "validate_suite_options"]
@@ -142,7 +143,7 @@ class Unit:
     n_agents: Optional[int]
     sides: List[str]  # sides to measure: vmas_ros, then vmas_ros_compiled, then the peer
     skipped: Dict[str, str]  # side -> why it is not measured
-    compiled_sides: Tuple[str, ...] = ()  # the sides built with compile_physics=True
+    compiled_sides: Tuple[str, ...] = ()  # the sides built with compile_physics=True (default: timed compiled)
     default_mode: bool = False  # vmas_ros is built as make_env builds it without flags (compiled_sides says how)
 
 
@@ -216,9 +217,9 @@ def validate_suite_options(workloads, steps, repeats, warmup, scale, threads, pe
         unknown = [p for p in ([peers] if isinstance(peers, str) else peers) if p not in _mpe.PEERS]
         if isinstance(peers, str) or unknown:
             raise ValueError(f"unknown peer(s) {unknown or [peers]}; valid peers: {list(_mpe.PEERS)}")
-    compiles = "compiled" in resolved or (resolved == ("default",) and compile_by_default("cpu", 1))
+    compiles = "compiled" in resolved or (resolved == ("default",) and resolve_compile(None, 1) is not False)
     if compiles and warmup < 1:  # the first compiled run compiles for seconds: never time it
-        raise ValueError(f"the {resolved[-1]} mode needs --warmup >= 1 (the first run compiles), got {warmup}; "
+        raise ValueError(f"the {resolved[-1]} mode needs --warmup >= 1 (its first runs compile), got {warmup}; "
                          f"--modes eager times without one")
     return resolved
 
@@ -236,12 +237,12 @@ def _our_sides(kind: str, modes: Sequence[str], num_envs: int) -> Tuple[List[str
     Both modes: "vmas_ros" (eager) and "vmas_ros_compiled". Compiled alone: the one
     "vmas_ros" side, compiled (as ``--compile-physics`` always wrote it). memory is eager only,
     except in the default mode, where its subprocess builds the env without flags. Default: the one
-    "vmas_ros" side, compiled where make_env would compile it (the sphere worlds are built with
-    ``World``, which compiles only when asked).
+    "vmas_ros" side as make_env builds it, its warm-up stepping on through the default mode's switch
+    (``timing.through_the_switch``); its compiled column says how the timed runs went (the sphere
+    worlds are built with ``World``, which compiles only when asked).
     """
-    if modes == ("default",):
-        compiled = kind in ("env", "envs_curve", "mpe") and compile_by_default("cpu", num_envs)
-        return [SIDE], ((SIDE,) if compiled else ())
+    if modes == ("default",):  # env cases find out in their warm-up (suite_cases.env_cases)
+        return [SIDE], ()
     if kind == "memory" or "compiled" not in modes:
         return [SIDE], ()
     if "eager" not in modes:
@@ -363,7 +364,9 @@ def _measure(unit: Unit, run_id: str, steps: int, repeats: int, warmup: int, thr
         return _memory_rows(run_id, unit, steps, repeats, threads, seed, loadavg, on_run)
     measured = {side: unit.num_envs for side in unit.sides}
     if w.kind == "mpe":
-        cases = {side: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps, side in unit.compiled_sides)
+        default = None if unit.default_mode else False  # None: make_env's default, timed through its switch
+        cases = {side: _mpe._vmas_case(SIDE, unit.num_envs, "cpu", steps, side in unit.compiled_sides or default,
+                                       on_switch=lambda compiled: record_timed_mode(unit, compiled))
                  for side in unit.sides if side != PEER_MPE}
         if PEER_MPE in unit.sides:
             measured[PEER_MPE] = min(unit.num_envs, mpe_max_envs or unit.num_envs)

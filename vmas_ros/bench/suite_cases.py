@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Dict, List, Mapping
 import torch
 
 from vmas_ros.bench.common import COMPILED_SIDE
-from vmas_ros.bench.timing import Case
+from vmas_ros.bench.timing import Case, through_the_switch
 
 if TYPE_CHECKING:  # only for the annotations: suite imports this module
     from vmas_ros.bench.suite import Unit
@@ -42,9 +42,10 @@ def library_of(side: str) -> str:
     return "vmas" if side == "vmas" else "vmas_ros"
 
 
-def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int, compiled: bool = False):
+def _make_env(side: str, scenario: str, num_envs: int, kwargs: Mapping, seed: int, compiled: bool = False,
+              default_mode: bool = False):
     make = importlib.import_module(library_of(side)).make_env
-    extra = {"compile_physics": compiled} if library_of(side) == "vmas_ros" else {}
+    extra = {"compile_physics": compiled} if library_of(side) == "vmas_ros" and not default_mode else {}
     return make(scenario, num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed, **dict(kwargs), **extra)
 
 
@@ -67,8 +68,9 @@ def env_cases(unit: "Unit", steps: int, seed: int) -> Dict[str, Case]:
     ``[n_agents, num_envs, size]`` tensor (stacked before timing), the form a swarm's
     controller sends; the peer has no such form and gets the same values as its list."""
     w = unit.workload
-    envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed, side in unit.compiled_sides)
-            for side in unit.sides}
+    ours_default = unit.default_mode and "vmas_ros" in unit.sides
+    envs = {side: _make_env(side, w.scenario, unit.num_envs, w.kwargs, seed, side in unit.compiled_sides,
+                            default_mode=ours_default and side == "vmas_ros") for side in unit.sides}
     first = envs[unit.sides[0]]
     unit.n_agents = first.n_agents
     dims = {side: [int(low.numel()) for low, _ in _action_bounds(env)] for side, env in envs.items()}
@@ -84,8 +86,15 @@ def env_cases(unit: "Unit", steps: int, seed: int) -> Dict[str, Case]:
             for action in side_actions:
                 env.step(action)
 
-        cases[side] = Case(run=run, setup=env.reset, device="cpu")
+        warmup_run = None
+        if ours_default and side == "vmas_ros":
+            warmup_run = through_the_switch(env, run, stacked, on_done=lambda compiled: record_timed_mode(unit, compiled))
+        cases[side] = Case(run=run, setup=env.reset, warmup_run=warmup_run, device="cpu")
     return cases
+
+
+def record_timed_mode(unit: "Unit", compiled: bool) -> None:
+    unit.compiled_sides = ("vmas_ros",) if compiled else ()
 
 
 def spheres_case(side: str, n_agents: int, num_envs: int, steps: int, seed: int, compiled: bool = False,

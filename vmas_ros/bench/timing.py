@@ -24,7 +24,10 @@ from typing import Callable, Dict, Iterator, List, Mapping, Optional
 
 import torch
 
-__all__ = ["Case", "Timing", "pinned_threads", "peak_rss_mb", "time_alternating", "time_callable"]
+from vmas_ros.bench.common import DEFAULT_MODE_WARMUP_MAX_STEPS
+
+__all__ = ["Case", "Timing", "pinned_threads", "peak_rss_mb", "through_the_switch", "time_alternating",
+           "time_callable"]
 
 
 @dataclass
@@ -36,6 +39,26 @@ class Case:
     setup: Optional[Callable[[], object]] = None
     warmup_run: Optional[Callable[[], object]] = None
     device: Optional[str] = None  # "cuda..." adds synchronisation and torch peak memory
+
+
+def through_the_switch(env, run: Callable[[], object], actions: list,
+                       on_done: Callable[[bool], object]) -> Callable[[], None]:
+    """A warm-up for a vmas_ros env of the default mode: ``run``, then steps of ``actions`` (cycled) until
+    the compiled step has taken over, when it comes within ``DEFAULT_MODE_WARMUP_MAX_STEPS`` steps; then a
+    reset. ``on_done(compiled)`` says whether the timed runs that follow are compiled."""
+    def warmup_run() -> None:
+        run()
+        world = env.world
+        switch = world.compiled_from_step
+        if switch is not None and switch <= DEFAULT_MODE_WARMUP_MAX_STEPS:
+            step = 0
+            while not world.physics_compiled and world.compiled_from_step is not None:
+                env.step(actions[step % len(actions)])
+                step += 1
+            env.reset()
+        on_done(world.physics_compiled)
+
+    return warmup_run
 
 
 @dataclass

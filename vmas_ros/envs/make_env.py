@@ -6,7 +6,7 @@ from enum import Enum
 from typing import Any, Dict, Optional, Tuple, Union
 
 from vmas_ros.envs.environment import Environment
-from vmas_ros.simulator.compile_default import resolve_compile
+from vmas_ros.simulator.compile_default import default_switch_step, resolve_compile
 from vmas_ros.simulator import core as _engine  # noqa: F401  every env needs the engine: load it with make_env
 from vmas_ros.simulator.scenario import BaseScenario
 
@@ -79,7 +79,8 @@ def make_env(
     ``compile_physics`` (not in VMAS): True runs the physics step through
     ``torch.compile`` (``World.compile_physics``: compiles on the first step, for
     seconds), False runs it eagerly (bit parity with VMAS), and None, the
-    default, compiles where a compiler for the device is present, as
+    default, steps eagerly and compiles once the run is long, at a step set by
+    the workload alone, where a compiler for the device is present, as
     ``VMAS_ROS_COMPILE`` says (see ``vmas_ros.simulator.compile_default``).
     """
     from vmas_ros.scenarios import load
@@ -87,7 +88,7 @@ def make_env(
     name = None if wrapper is None else wrapper_name(wrapper)  # a bad name fails before the world is built
     if name in _SPLIT_DONE:
         terminated_truncated = True
-    compiled = resolve_compile(compile_physics, device, num_envs)  # a bad value fails before the world is built too
+    compiled = resolve_compile(compile_physics, num_envs)  # a bad value fails before the world is built too
 
     if isinstance(scenario, str):
         scenario = load(scenario)
@@ -111,6 +112,8 @@ def make_env(
     )
     if compiled:
         env.world.compile_physics()
+    elif compiled is None:  # the default mode: eager first, compiled once the run is long (compile_default)
+        env.world.compile_physics(after_steps=default_switch_step(num_envs, len(env.world.entities)))
     if name is None:
         return env
     return wrap(env, name, **(wrapper_kwargs or {}))

@@ -146,7 +146,7 @@ class SimNode(StepLoop, Node):
     def _compile_physics(self, world, device) -> None:
         """The step and its LIDAR casts through torch.compile, as ``compile_physics`` says: ``auto`` (where the
         default mode compiles) on a thread of its own while the node steps eagerly, never pausing; ``true``
-        on the first step (a pause of seconds, but every step compiled, as make_env does)."""
+        on the first step (a pause of seconds, but every step compiled, as make_env(compile_physics=True))."""
         mode = self.params.compile_mode()
         if mode == "true":
             world.compile_physics()
@@ -159,13 +159,15 @@ class SimNode(StepLoop, Node):
 
     def _report_compiled(self) -> None:
         """One log line when the background compile is done (called after each step until then)."""
-        compiler = self.env.world.background_compiler
-        if compiler.started and compiler.idle:
+        world = self.env.world
+        compiler = world.background_compiler
+        if compiler.released:
             self._compile_reported = True
             if compiler.failed:
                 self.get_logger().warning(f"compile_physics: {compiler.failed} of {compiler.compiled + compiler.failed} "
                                           f"compiles failed; those parts stay eager")
-            self.get_logger().info(f"compile_physics: compiled step in use from step {self.steps + 1} "
+            # the world's own step index: make_env + compile_physics(after_steps=N) repeats the switch offline
+            self.get_logger().info(f"compile_physics: compiled step in use from step {world.compiled_from_step} "
                                    f"(compiled in {compiler.first_ready_s:.1f} s)")
 
     def _build_io(self) -> None:

@@ -5,9 +5,12 @@ a node must not stop publishing for the seconds a compile takes. Each
 compiled function of the world (the step, the LIDAR's ray kernels, the
 scenario's kernels; :class:`vmas_ros.simulator.compiling._OneGraph`) is
 handed to :class:`BackgroundCompiler` on its first call, with copies of that
-call's tensors, and runs eagerly until its compiled code is ready; from the
-next call on it runs compiled. So each function switches between two calls,
-never inside one, and the caller never waits for a compile.
+call's tensors, and runs eagerly until its compiled code is ready. When every
+compile handed over so far is done, the world releases them all at once,
+before its next step (``released``; ``World.compiled_from_step`` names that
+step), so one step is wholly eager or wholly compiled, and the caller never
+waits for a compile. A function first called after the release (a new
+layout) runs compiled as soon as its own compile is done.
 
 The compile runs with the caller's grad mode and torch thread count (the
 compiled code is specialised for both), and touches only the copies it was
@@ -73,6 +76,8 @@ class BackgroundCompiler:
         self._started_at: Optional[float] = None
         self.first_ready_s: Optional[float] = None
         self.compiled = 0  # jobs that compiled
+        #: set by the world between two steps once the first compiles are done: compiled functions in use
+        self.released = False
         self.failed = 0  # jobs whose compile failed (their functions stay eager)
 
     @property

@@ -1,35 +1,39 @@
-"""Whether a world compiles its physics when its maker did not say: the default mode.
+"""Whether and when a world compiles its physics when its maker did not say: the default mode.
 
-``make_env`` and sim_node compile the physics step by default wherever
-``torch.compile`` can build code for the device (a C++ compiler for the CPU,
-Triton for CUDA), and run it eagerly elsewhere, saying so once per process.
-Very large batches step eagerly too (``thresholds.DEFAULT_COMPILE_MAX_ENVS``).
-Compiling is what makes the step fast at every batch size (docs/bench), and
-most users never look for a flag.
-
-``VMAS_ROS_COMPILE`` sets that default for a process and the processes it
-starts: ``auto`` (the above), ``1`` (always compile) or ``0`` (always eager:
-what the test suite uses, so that it does not pay a compile for every env).
-An explicit ``compile_physics=True/False`` wins over both.
+``make_env`` without ``compile_physics`` steps eagerly first and compiles only
+once the run has shown it is long: after ``thresholds.DEFAULT_COMPILE_AFTER_WORK``
+entity-env-steps (steps x envs x entities), counted from ``make_env``
+(:func:`default_switch_step`). A short script never pays the compiler, not
+even its import; a long run pays it once and then steps compiled. Very large
+batches step eagerly throughout (``thresholds.DEFAULT_COMPILE_MAX_ENVS``), and
+so does a device with no working compiler, saying so once per process.
 
 The compiled step equals the eager one to float rounding, not bit for bit
-(the compiler fuses and reorders float operations), so bit parity with VMAS
-holds on the eager path only. A seeded run is reproducible in either mode:
-``make_env`` builds the compiled step on the first step, before any state
-depends on it.
+(the compiler fuses and reorders float operations). So the switch step is a
+function of the workload alone, never of the clock: a seeded run gives the
+same bits on every run and every machine, eager up to that step and compiled
+after it. Bit parity with VMAS holds on the eager path.
+
+``VMAS_ROS_COMPILE`` sets that default for a process and the processes it
+starts: ``auto`` (the above), ``1`` (compile from the first step) or ``0``
+(always eager: what the test suite uses). An explicit
+``compile_physics=True/False`` wins over both. sim_node's default differs, and
+why: docs/node.md.
 """
 from __future__ import annotations
 
 import functools
 import logging
+import math
 import os
 from typing import Optional
 
 import torch
 
-from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_MAX_ENVS
+from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_AFTER_WORK, DEFAULT_COMPILE_MAX_ENVS
 
-__all__ = ["ENV_VAR", "MODES", "compile_by_default", "compiler_missing", "resolve_compile", "note_fallback"]
+__all__ = ["ENV_VAR", "MODES", "compile_by_default", "compiler_missing", "compiler_ready", "default_switch_step",
+           "resolve_compile", "note_fallback"]
 
 ENV_VAR = "VMAS_ROS_COMPILE"
 #: what ``VMAS_ROS_COMPILE`` may hold, and what each means for a world nobody asked about
@@ -86,6 +90,12 @@ def compile_by_default(device, num_envs: int) -> bool:
         return forced
     if isinstance(num_envs, int) and num_envs > DEFAULT_COMPILE_MAX_ENVS:  # a bad count: the env says so
         return False
+    return compiler_ready(device)
+
+
+def compiler_ready(device) -> bool:
+    """Whether ``torch.compile`` can build code for ``device``; the first time it cannot, one log line
+    says why (imports the compiler's code-building side: called only when a compile is due)."""
     reason = compiler_missing(device)
     if reason is None:
         return True
@@ -94,13 +104,28 @@ def compile_by_default(device, num_envs: int) -> bool:
     return False
 
 
-def resolve_compile(compile_physics: Optional[bool], device, num_envs: int) -> bool:
-    """``compile_physics`` as given, or the default mode's choice when it is None."""
+def resolve_compile(compile_physics: Optional[bool], num_envs: int) -> Optional[bool]:
+    """What ``make_env`` does: True compiles from the first step, False steps eagerly, None is the default
+    mode's switch (:func:`default_switch_step`). ``compile_physics`` as given, else ``VMAS_ROS_COMPILE``.
+
+    Nothing here imports the compiler: whether it works is checked when a compile is due."""
     if compile_physics is None:
-        return compile_by_default(device, num_envs)
+        forced = MODES[env_mode()]
+        if forced is not None:
+            return forced
+        if isinstance(num_envs, int) and num_envs > DEFAULT_COMPILE_MAX_ENVS:  # a bad count: the env says so
+            return False
+        return None
     if not isinstance(compile_physics, bool):
         raise TypeError(f"compile_physics must be True, False or None (the default mode), got {compile_physics!r}")
     return compile_physics
+
+
+def default_switch_step(num_envs: int, n_entities: int) -> int:
+    """How many eager steps the default mode takes before the compiled step takes over: enough that
+    ``steps * num_envs * n_entities`` reaches ``DEFAULT_COMPILE_AFTER_WORK`` (at least one step)."""
+    work_per_step = max(1, int(num_envs)) * max(1, int(n_entities))
+    return max(1, math.ceil(DEFAULT_COMPILE_AFTER_WORK / work_per_step))
 
 
 def note_fallback(error: BaseException) -> None:

@@ -118,8 +118,9 @@ class _OneGraph:
     its guards (correct, slower; the compiled-path tests require one graph).
 
     With a ``background`` compiler, the first call hands a copy of its inputs
-    to it and every call runs ``fn`` eagerly until that compile is done
-    (:mod:`vmas_ros.simulator.background_compile`).
+    to it and every call runs ``fn`` eagerly until that compile is done and
+    the world has switched, between two steps, to its compiled functions all
+    at once (:mod:`vmas_ros.simulator.background_compile`).
     """
 
     def __init__(self, fn: Callable, mode: Optional[str], guard_filter: Callable,
@@ -131,9 +132,13 @@ class _OneGraph:
         self._background = background
         self._eager_until_compiled = background is not None
         self._submitted = False
+        self._ready = False  # (background) its compile is done; it runs compiled once the world has switched
 
     def __call__(self, *args, **kwargs):
         if self._eager_until_compiled:
+            if self._ready and self._background.released:  # the world switched, between two steps
+                self._eager_until_compiled = False
+                return self._compiled_call(*args, **kwargs)
             if self._submitted:
                 return self._fn(*args, **kwargs)
             # the inputs are copied before the eager call (which may write into them), and handed over after
@@ -146,9 +151,8 @@ class _OneGraph:
         return self._compiled_call(*args, **kwargs)
 
     def _background_done(self, ok: bool) -> None:
-        # (on the compile thread) from the next call on, run compiled; a failed compile stays eager
-        if ok:
-            self._eager_until_compiled = False
+        # (on the compile thread) ready: compiled from the world's switch on; a failed compile stays eager
+        self._ready = ok
 
     def _compiled_call(self, *args, **kwargs):
         if self.one_graph is False:

@@ -16,6 +16,7 @@ __all__ = [
     "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
     "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
     "GRID_MIN_SPHERES", "GRID_START_CAPACITY", "GRID_MIN_LIDARS", "DEFAULT_COMPILE_MAX_ENVS",
+    "DEFAULT_COMPILE_AFTER_WORK",
 ]
 
 # --- the default mode -------------------------------------------------------------------------
@@ -27,6 +28,15 @@ __all__ = [
 #: ``num_envs`` to fill their memory. ``compile_physics=True`` still compiles at any size
 #: (docs/bench/default_mode.md has both sides).
 DEFAULT_COMPILE_MAX_ENVS = 20_000
+
+#: The default mode steps eagerly until a run has done this many entity-env-steps (steps x envs x
+#: entities), then compiles once and steps compiled. Compiling costs seconds (more on a machine's first
+#: compile) and saves a share of each step that grows with the batch, so a short run is faster
+#: without it and a long one with it. Work, not time, decides, so the switch step is the same on every
+#: machine. Set so that the short runs people time (a script's first thousands of steps at tens of envs,
+#: a tutorial-size training loop) stay eager, while a batch of thousands compiles within its first
+#: hundred steps (docs/bench/default_mode.md).
+DEFAULT_COMPILE_AFTER_WORK = 5_000_000
 
 # --- physics step ---------------------------------------------------------------------------
 

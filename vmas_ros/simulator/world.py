@@ -136,25 +136,28 @@ class World:
         self._sphere_grid = value
         self._invalidate_tables()
 
-    def compile_physics(self, enabled: bool = True, mode: Optional[str] = None, background: bool = False) -> None:
-        """Run the physics step through ``torch.compile`` (``make_env`` asks for it by default where it can).
+    def compile_physics(self, enabled: bool = True, mode: Optional[str] = None, background: bool = False,
+                        after_steps: int = 0) -> None:
+        """Run the physics step and the LIDAR's ray kernels through ``torch.compile`` (docs/engine.md).
 
-        The step is a fixed sequence of batched kernels with no host reads, so
-        the compiler fuses it into a few loops (speed-ups in docs/bench/). The
-        LIDAR's ray kernels (``cast_rays``) are compiled too. The first step
-        compiles (seconds; a CPU needs a C++ compiler); a new batch size or a
-        change of entities compiles again. ``mode`` goes to
-        ``torch.compile`` (e.g. ``"reduce-overhead"``: CUDA graphs on a GPU).
-        Results equal the eager step to float rounding, not bit for bit: the
-        compiler may reorder and fuse float ops, so parity with VMAS is only
-        bit-exact on the eager path.
-
-        ``background=True`` compiles each function on a thread of its own
-        (:mod:`~vmas_ros.simulator.background_compile`): the world steps
-        eagerly, never waiting, and each function runs compiled from the call
-        after its compile is done (what sim_node does by default).
+        The first compiled step compiles (seconds; a CPU needs a C++
+        compiler), and so does a new batch size or a change of entities.
+        ``mode`` goes to ``torch.compile`` (``"reduce-overhead"``: CUDA graphs).
+        Results equal the eager step to float rounding, not bit for bit, so
+        parity with VMAS is bit-exact on the eager path only.
+        ``after_steps=n``: step eagerly ``n`` more steps, then compile
+        (``compiled_from_step``; the default mode's switch, set by the
+        workload, never the clock). ``background=True``: compile each function
+        on a thread of its own while the world steps eagerly, each running
+        compiled once ready (sim_node; ``background_compile``).
         """
-        self._compiled.compile(enabled, mode, background)
+        self._compiled.request(enabled, mode, background, after_steps, self._device)
+
+    @property
+    def compiled_from_step(self) -> Optional[int]:
+        """The first of this world's steps (counted from 0) that runs compiled, planned or past; None when
+        none is (eager, or a compiler that was missing when it was due)."""
+        return self._compiled.switch_at
 
     @property
     def physics_compiled(self) -> bool:
@@ -302,6 +305,7 @@ class World:
     # ---------------------------------------------------------------------- step
     def step(self) -> None:
         """Advance every env by ``dt``: forces, contacts, joints, integration, messages."""
+        self._compiled.tick()  # the default mode's compiled step takes over at a planned step
         tables = self.tables
         if not self.entities:
             return
