@@ -3,6 +3,7 @@
     python -m test.compat.vmas_suite                      # the tests VMAS's source distribution carries
     python -m test.compat.vmas_suite --repo GIT_DIR       # also test_scenarios/ and test_wrappers/
     python -m test.compat.vmas_suite -- -x -k lidar       # after --, arguments for pytest
+    python -m test.compat.vmas_suite --on-vmas [--repo GIT_DIR]   # the same tests on VMAS itself
 
 VMAS's sdist carries ``tests/test_vmas.py`` and ``tests/test_lidar.py``; its
 ``tests/test_scenarios/`` and ``tests/test_wrappers/`` exist only in its git
@@ -17,18 +18,26 @@ ours. ``test_vmas.py`` lists the scenarios by globbing ``../vmas/scenarios``
 beside itself, so that folder holds one link per registered vmas_ros scenario,
 under VMAS's layout (``mpe/``, ``debug/``): it collects ours.
 
-Prints pytest's summary and ``vmas suite: N passed, N failed, N skipped``;
-exits with pytest's exit code.
+``--on-vmas`` runs the same tests on the installed VMAS 1.5.2 instead (no
+conftest, and ``vmas/`` beside the tests is VMAS's own package): the yardstick
+for the time the suite takes on vmas_ros. The suite runs as a user's would, in
+vmas_ros's default mode unless ``VMAS_ROS_COMPILE`` says otherwise.
+
+Prints pytest's summary and ``vmas suite on vmas_ros: N passed, N failed, N
+skipped in S s`` (``on VMAS 1.5.2`` with ``--on-vmas``); exits with pytest's
+exit code.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import re
 import subprocess
 import sys
 import tarfile
 import tempfile
+import time
 from pathlib import Path
 from typing import Dict, List, Optional
 
@@ -113,22 +122,41 @@ def summary(output: str) -> Dict[str, int]:
     return counts
 
 
-def run(repo: Optional[Path], cache: Path, pytest_args: List[str]) -> int:
+def link_vmas(into: Path) -> Path:
+    """``into/vmas``: a link to the installed VMAS package (``--on-vmas``); its version must be ``VMAS_VERSION``."""
+    from importlib import metadata
+
+    version = metadata.version("vmas")
+    if version != VMAS_VERSION:
+        raise SystemExit(f"--on-vmas needs vmas=={VMAS_VERSION} installed, found {version}")
+    package = Path(importlib.util.find_spec("vmas").origin).parent
+    (into / "vmas").symlink_to(package)
+    return package
+
+
+def run(repo: Optional[Path], cache: Path, pytest_args: List[str], on_vmas: bool = False) -> int:
+    side = f"VMAS {VMAS_VERSION}" if on_vmas else "vmas_ros"
     with tempfile.TemporaryDirectory(prefix="vmas_suite_") as scratch:
         where = Path(scratch)
         paths = unpack_sdist_tests(sdist(cache), where)
         if repo is not None:
             paths += unpack_repo_tests(repo, where)
-        (where / "tests" / "conftest.py").write_text(CONFTEST)
-        linked = link_scenarios(where)
-        print(f"vmas suite: {', '.join(str(p.relative_to(where)) for p in paths)}; {linked} scenarios linked")
+        if on_vmas:
+            found = f"VMAS's own scenarios from {link_vmas(where)}"
+        else:
+            (where / "tests" / "conftest.py").write_text(CONFTEST)
+            found = f"{link_scenarios(where)} scenarios linked"
+        print(f"vmas suite on {side}: {', '.join(str(p.relative_to(where)) for p in paths)}; {found}")
         command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rfE",
                    f"--rootdir={where}", *[str(p) for p in paths], *pytest_args]
+        start = time.perf_counter()
         result = subprocess.run(command, cwd=where, capture_output=True, text=True)
+        seconds = time.perf_counter() - start
         print(result.stdout[-20000:], result.stderr[-5000:], sep="\n")
         counts = summary(result.stdout)
-        print(f"vmas suite: {counts['passed']} passed, {counts['failed']} failed, {counts['skipped']} skipped"
-              + (f", {counts['errors']} errors" if counts["errors"] else ""))
+        print(f"vmas suite on {side}: {counts['passed']} passed, {counts['failed']} failed, "
+              f"{counts['skipped']} skipped" + (f", {counts['errors']} errors" if counts["errors"] else "")
+              + f" in {seconds:.0f} s")
         return result.returncode
 
 
@@ -139,8 +167,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repo", type=Path, help="VMAS's git repository (a clone or a bare git dir)")
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="where the sdist is kept")
+    parser.add_argument("--on-vmas", action="store_true",
+                        help=f"run the tests on the installed VMAS {VMAS_VERSION} itself (to time the suite there)")
     args = parser.parse_args(own)
-    return run(args.repo, args.cache, pytest_args)
+    return run(args.repo, args.cache, pytest_args, on_vmas=args.on_vmas)
 
 
 if __name__ == "__main__":
