@@ -42,3 +42,24 @@ def test_a_bad_mode_or_a_failing_child_is_reported():
         process.run_process_benchmark(["transport_2"], [5], 1, mode="fast", progress=False)
     with pytest.raises(RuntimeError, match="exited 1"):
         process.run_once("no_such_library", "transport", 2, 5)
+
+
+def test_a_cold_cache_is_empty_fresh_and_gone_after(tmp_path, monkeypatch):
+    """``--process-cold-cache``: every vmas_ros child compiles into an empty cache folder of its own, removed
+    after it exits; VMAS's children are left as they are."""
+    seen = tmp_path / "seen.txt"
+    monkeypatch.delenv("TORCHINDUCTOR_CACHE_DIR", raising=False)
+    monkeypatch.setattr(process, "_SCRIPT", "import os, sys, json\n"
+                        f"cache = os.environ.get('TORCHINDUCTOR_CACHE_DIR', '-')\n"
+                        f"empty = cache == '-' or not os.listdir(cache)\n"
+                        f"open({str(seen)!r}, 'a').write(json.loads(sys.argv[1])['module'] + ' ' + cache + ' '"
+                        f" + str(empty) + '\\n')\n")
+    for side in ("vmas_ros", "vmas_ros", "vmas"):
+        process.run_once(side, "simple_spread", 1, 1, mode="eager", cold_cache=True)
+    process.run_once("vmas_ros", "simple_spread", 1, 1, mode="eager")
+    lines = [line.split() for line in seen.read_text().splitlines()]
+    assert [line[0] for line in lines] == ["vmas_ros", "vmas_ros", "vmas", "vmas_ros"]
+    first, second = lines[0][1], lines[1][1]
+    assert first != second and all(line[2] == "True" for line in lines[:2])
+    assert not any(__import__("os").path.exists(path) for path in (first, second))
+    assert lines[2][1] == lines[3][1] == "-"

@@ -75,6 +75,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     process.add_argument("--process-mode", default="default", metavar="MODE",
                          help="process: vmas_ros as make_env builds it without flags (default), or eager, "
                               "or compiled")
+    process.add_argument("--process-cold-cache", action="store_true",
+                         help="process: each vmas_ros process compiles from an empty compile cache of its own "
+                              "(a machine's first compile); default: torch's cache as earlier runs left it")
     from vmas_ros.bench.node import add_node_bench_arguments
 
     add_node_bench_arguments(parser)
@@ -95,7 +98,8 @@ def _run_process(args: argparse.Namespace) -> int:
     try:
         rows = process.run_process_benchmark(
             args.process_workloads or process.DEFAULT_WORKLOADS, args.process_steps or process.DEFAULT_STEPS,
-            args.repeats, mode=args.process_mode, threads=args.threads, progress=not args.no_progress)
+            args.repeats, mode=args.process_mode, threads=args.threads, progress=not args.no_progress,
+            cold_cache=args.process_cold_cache)
     except ValueError as error:
         print(f"vmas-ros bench process: {error}", file=sys.stderr)
         return 2

@@ -5,7 +5,9 @@ Everything it pays shows here, and nowhere in a per-step benchmark: imports,
 building the world, compiling (in the default mode), memory. Each run is a
 fresh interpreter (``python -c``) that does exactly that, with random actions
 drawn from a seeded generator; the parent times it from start to exit and
-reads its peak RSS from the kernel (``os.wait4``). vmas_ros and VMAS
+reads its peak RSS from the kernel (``os.wait4``). Before a workload is timed,
+one untimed process per side leaves the files it reads in the page cache and
+its bytecode cached, as on a user's machine. vmas_ros and VMAS
 alternate within every repeat, in the default mode (``VMAS_ROS_COMPILE``
 removed from the child's environment) unless ``--process-mode`` says otherwise.
 
@@ -19,6 +21,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
@@ -61,17 +64,30 @@ def parse_workload(name: str) -> tuple:
 
 
 def run_once(side: str, scenario: str, num_envs: int, steps: int, seed: int = 0, mode: str = "default",
-             threads: Optional[int] = None) -> Dict[str, float]:
+             threads: Optional[int] = None, cold_cache: bool = False) -> Dict[str, float]:
     """One fresh process of ``side`` (``vmas_ros`` or ``vmas``): ``{"seconds", "peak_rss_mb"}``.
 
+    ``cold_cache`` gives a vmas_ros child an empty compile cache of its own (``TORCHINDUCTOR_CACHE_DIR``),
+    as on a machine's first compile; otherwise it shares the user's, warm from earlier runs.
     Raises RuntimeError with the child's last lines when it fails.
     """
+    if cold_cache and side == "vmas_ros":
+        with tempfile.TemporaryDirectory(prefix="vmas_ros_cold_cache_") as cache:
+            return _run_child(side, scenario, num_envs, steps, seed, mode, threads, {"TORCHINDUCTOR_CACHE_DIR": cache})
+    return _run_child(side, scenario, num_envs, steps, seed, mode, threads, {})
+
+
+def _run_child(side: str, scenario: str, num_envs: int, steps: int, seed: int, mode: str, threads: Optional[int],
+               extra_environ: Dict[str, str]) -> Dict[str, float]:
     config = {"module": side, "scenario": scenario, "num_envs": num_envs, "steps": steps, "seed": seed,
               "threads": threads}
     environ = dict(os.environ)
     environ.pop("VMAS_ROS_COMPILE", None)
+    # as on a user's machine, where bytecode is cached (an installed wheel's at install time, as VMAS's is)
+    environ.pop("PYTHONDONTWRITEBYTECODE", None)
     if side == "vmas_ros" and PROCESS_MODES[mode] is not None:
         environ["VMAS_ROS_COMPILE"] = PROCESS_MODES[mode]
+    environ.update(extra_environ)
     start = time.perf_counter()
     child = subprocess.Popen([sys.executable, "-c", _SCRIPT, json.dumps(config)], env=environ,
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -86,9 +102,9 @@ def run_once(side: str, scenario: str, num_envs: int, steps: int, seed: int = 0,
 
 
 def run_process_benchmark(workloads: Sequence[str], steps: Sequence[int], repeats: int, mode: str = "default",
-                          threads: Optional[int] = None, progress: bool = True) -> List[dict]:
+                          threads: Optional[int] = None, progress: bool = True, cold_cache: bool = False) -> List[dict]:
     """Every workload at every step count, ``repeats`` times per side, the sides alternating; one row each
-    with the medians and every sample."""
+    with the medians and every sample. ``cold_cache``: each vmas_ros process compiles from an empty cache."""
     from tqdm import tqdm
 
     if mode not in PROCESS_MODES:
@@ -100,15 +116,18 @@ def run_process_benchmark(workloads: Sequence[str], steps: Sequence[int], repeat
     total = len(parsed) * len(steps) * repeats * 2
     with tqdm(total=total, desc="processes", disable=not progress) as bar:
         for name, scenario, num_envs in parsed:
+            for side in ("vmas_ros", "vmas"):  # untimed: caches each side's bytecode and files alike
+                run_once(side, scenario, num_envs, 1, mode="eager", threads=threads)
             for count in steps:
                 samples: Dict[str, List[dict]] = {"vmas_ros": [], "vmas": []}
                 for repeat in range(repeats):
                     order = ("vmas_ros", "vmas") if repeat % 2 == 0 else ("vmas", "vmas_ros")
                     for side in order:
-                        samples[side].append(run_once(side, scenario, num_envs, count, mode=mode, threads=threads))
+                        samples[side].append(run_once(side, scenario, num_envs, count, mode=mode, threads=threads,
+                                                      cold_cache=cold_cache))
                         bar.update()
                 row = {"workload": name, "scenario": scenario, "num_envs": num_envs, "steps": count, "mode": mode,
-                       "repeats": repeats, "threads": threads}
+                       "repeats": repeats, "threads": threads, "cold_cache": cold_cache}
                 for side, runs in samples.items():
                     row[f"{side}_s"] = statistics.median(r["seconds"] for r in runs)
                     row[f"{side}_peak_mb"] = statistics.median(r["peak_rss_mb"] for r in runs)
