@@ -60,14 +60,17 @@ def test_the_default_plans_its_switch_from_the_workload_up_to_a_size(monkeypatch
 
 
 def test_the_switch_step_follows_the_work_and_not_the_clock(monkeypatch):
-    work = compile_default.DEFAULT_COMPILE_AFTER_WORK
-    assert compile_default.default_switch_step(32, 6) == -(-work // 192)
+    work, floor = compile_default.DEFAULT_COMPILE_AFTER_WORK, compile_default.DEFAULT_COMPILE_MIN_STEP_WORK
+    assert compile_default.default_switch_step(1000, 6) == -(-work // 6000)
+    assert compile_default.default_switch_step(32, 6) == compile_default.default_switch_step(1, 1) == -(-work // floor)
     # the sizes people time as short runs stay eager past 10,000 steps; thousands of envs switch early
     assert compile_default.default_switch_step(32, 6) > 10_000  # transport, 32 envs
     assert compile_default.default_switch_step(60, 8) > 10_000  # navigation, TorchRL's tutorial size
     assert compile_default.default_switch_step(10_000, 6) <= 100
     assert compile_default.default_switch_step(10 ** 9, 10) == 1  # at least one eager step
+    assert compile_default.default_switch_step(1, 6) < 20_000  # one env compiles too, as the fixed cost counts
     monkeypatch.setattr(compile_default, "DEFAULT_COMPILE_AFTER_WORK", 100)
+    monkeypatch.setattr(compile_default, "DEFAULT_COMPILE_MIN_STEP_WORK", 1)
     assert compile_default.default_switch_step(4, 6) == 5
 
 
@@ -175,6 +178,7 @@ def test_seeded_default_runs_repeat_bit_for_bit_across_the_switch(monkeypatch, f
     if compile_default.compiler_missing("cpu"):
         pytest.fail(f"the test machine needs a C++ compiler: {compile_default.compiler_missing('cpu')}")
     monkeypatch.setattr(compile_default, "DEFAULT_COMPILE_AFTER_WORK", 8 * 8 * 6)  # 8 envs, 6 entities: step 8
+    monkeypatch.setattr(compile_default, "DEFAULT_COMPILE_MIN_STEP_WORK", 1)
 
     def run(**kwargs):
         env = vmas_ros.make_env("transport", num_envs=8, seed=7, **kwargs)

@@ -19,7 +19,7 @@ _LABEL = {"vmas_ros": "vmas_ros", "vmas": "VMAS", "mpe": "MPE", COMPILED_SIDE: "
 BENCHMARKS = ("mpe", "suite", "node", "process")
 #: The default mode's long run, as the benchmarks time it: a warm-up steps on through the default mode's
 #: switch to the compiled step when that comes within this many steps; a later switch is timed eager
-DEFAULT_MODE_WARMUP_MAX_STEPS = 5_000
+DEFAULT_MODE_WARMUP_MAX_STEPS = 20_000
 
 CSV_COLUMNS = [
     "run_id", "scenario", "side", "device", "num_envs", "steps", "repeats", "median_s", "min_s", "max_s",

@@ -386,7 +386,7 @@ def measured_modes(rows: Sequence[dict]) -> List[str]:
 _MODES_LINE = {
     ("default",): "vmas_ros in the default mode, as make_env builds it without flags (`--modes default`, the "
                   "default), in its long run: the warm-up steps on through the default mode's switch to the compiled step "
-                  "where that comes within 5,000 steps; the `default mode` column says how each point was timed.",
+                  "where that comes within 20,000 steps; the `default mode` column says how each point was timed.",
     ("eager",): "vmas_ros eager (no torch.compile).",
     ("compiled",): "vmas_ros compiled: physics through torch.compile (`--modes compiled`, or `--compile-physics`; "
                    "memory_30k eager).",

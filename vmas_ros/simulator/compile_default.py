@@ -2,7 +2,8 @@
 
 ``make_env`` without ``compile_physics`` steps eagerly first and compiles only
 once the run has shown it is long: after ``thresholds.DEFAULT_COMPILE_AFTER_WORK``
-entity-env-steps (steps x envs x entities), counted from ``make_env``
+entity-env-steps (steps x envs x entities, each step counting as at least
+``DEFAULT_COMPILE_MIN_STEP_WORK``), counted from ``make_env``
 (:func:`default_switch_step`). A short script never pays the compiler, not
 even its import; a long run pays it once and then steps compiled. Very large
 batches step eagerly throughout (``thresholds.DEFAULT_COMPILE_MAX_ENVS``), and
@@ -30,7 +31,8 @@ from typing import Optional
 
 import torch
 
-from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_AFTER_WORK, DEFAULT_COMPILE_MAX_ENVS
+from vmas_ros.simulator.thresholds import (DEFAULT_COMPILE_AFTER_WORK, DEFAULT_COMPILE_MAX_ENVS,
+                                           DEFAULT_COMPILE_MIN_STEP_WORK)
 
 __all__ = ["ENV_VAR", "MODES", "compile_by_default", "compiler_missing", "compiler_ready", "default_switch_step",
            "resolve_compile", "note_fallback"]
@@ -123,8 +125,9 @@ def resolve_compile(compile_physics: Optional[bool], num_envs: int) -> Optional[
 
 def default_switch_step(num_envs: int, n_entities: int) -> int:
     """How many eager steps the default mode takes before the compiled step takes over: enough that
-    ``steps * num_envs * n_entities`` reaches ``DEFAULT_COMPILE_AFTER_WORK`` (at least one step)."""
-    work_per_step = max(1, int(num_envs)) * max(1, int(n_entities))
+    ``steps * num_envs * n_entities`` reaches ``DEFAULT_COMPILE_AFTER_WORK``, each step counting as at
+    least ``DEFAULT_COMPILE_MIN_STEP_WORK`` (at least one step)."""
+    work_per_step = max(DEFAULT_COMPILE_MIN_STEP_WORK, max(1, int(num_envs)) * max(1, int(n_entities)))
     return max(1, math.ceil(DEFAULT_COMPILE_AFTER_WORK / work_per_step))
 
 

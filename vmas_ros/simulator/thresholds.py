@@ -16,7 +16,7 @@ __all__ = [
     "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
     "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
     "GRID_MIN_SPHERES", "GRID_START_CAPACITY", "GRID_MIN_LIDARS", "DEFAULT_COMPILE_MAX_ENVS",
-    "DEFAULT_COMPILE_AFTER_WORK",
+    "DEFAULT_COMPILE_AFTER_WORK", "DEFAULT_COMPILE_MIN_STEP_WORK",
 ]
 
 # --- the default mode -------------------------------------------------------------------------
@@ -37,6 +37,11 @@ DEFAULT_COMPILE_MAX_ENVS = 20_000
 #: a tutorial-size training loop) stay eager, while a batch of thousands compiles within its first
 #: hundred steps (docs/bench/default_mode.md).
 DEFAULT_COMPILE_AFTER_WORK = 5_000_000
+
+#: ... and every step counts as at least this much work: a step's fixed cost (its Python and the launch of
+#: each small kernel), which the compiled step cuts too, weighs most at a few envs. So a run of one env
+#: compiles after ``DEFAULT_COMPILE_AFTER_WORK / DEFAULT_COMPILE_MIN_STEP_WORK`` steps, not never.
+DEFAULT_COMPILE_MIN_STEP_WORK = 400
 
 # --- physics step ---------------------------------------------------------------------------
 
