@@ -24,6 +24,7 @@ from test.ros.conftest import NODE, REPO, sim_env, stamp_ns
 from vmas_ros.rostools import param
 from vmas_ros.rostools.bag import summarize_bag
 from vmas_ros.rostools.call import call
+from vmas_ros.rostools.drive import _sibling_prefix
 from vmas_ros.rostools.graph import ToolError, resolve_name
 
 pytestmark = [pytest.mark.ros]
@@ -53,6 +54,13 @@ def test_bad_names_are_refused_naming_them(name, namespace):
     with pytest.raises(ToolError, match="is not a valid ROS 2") as error:
         resolve_name(name, namespace)
     assert error.value.exit_code == 2
+
+
+@pytest.mark.parametrize("topic, prefix", [("/swarm_a/agent_0/cmd_vel", "/swarm_a/"),
+                                           ("/agent_0/cmd_vel", "/"), ("/a/b/agent_3/cmd_vel", "/a/b/")])
+def test_an_agent_is_called_missing_only_by_its_own_namespace(topic, prefix):
+    # another simulator's agents, discovered first, must not make this one's look missing
+    assert _sibling_prefix(topic) == prefix
 
 
 # -------------------------------------------------------- against sim_node

@@ -21,8 +21,9 @@ __all__ = ["DriveReport", "drive"]
 
 TWIST = "geometry_msgs/msg/Twist"
 TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
-#: once other agents' cmd_vel subscribers are seen, how long to wait for the asked one before
-#: calling it missing (discovery announces a node's topics together, within a fraction of this)
+#: once other agents' cmd_vel subscribers are seen in the asked agent's namespace, how long to
+#: wait for the asked one before calling it missing (discovery announces a node's topics
+#: together, within a fraction of this; another node's agents say nothing about this one's)
 MISSING_AFTER_S = 1.0
 #: after the publisher matched, time for the subscriber's side of the match to complete (DDS
 #: matches the two ends separately; a best-effort reader drops what arrives before its side)
@@ -62,9 +63,20 @@ def _cmd_vel_listeners(tool: ToolNode) -> List[str]:
                   if name.endswith("/cmd_vel") and node.count_subscribers(name) > 0)
 
 
+def _sibling_prefix(topic: str) -> str:
+    """The namespace that ``topic``'s agent shares with its node's other agents:
+    ``/swarm_a/agent_0/cmd_vel`` gives ``/swarm_a/``, ``/agent_0/cmd_vel`` gives ``/``."""
+    return topic.rsplit("/", 2)[0] + "/"
+
+
 def _find_listener(tool: ToolNode, topic: str, agent: str, wait: float) -> str:
-    """The message type the subscriber of ``topic`` takes, once one is seen; ToolError if none."""
+    """The message type the subscriber of ``topic`` takes, once one is seen; ToolError if none.
+
+    The agent is called missing only after its siblings (other cmd_vel listeners in the same
+    namespace) have been seen for :data:`MISSING_AFTER_S`: several simulators in one graph are
+    discovered one after another, so another namespace's agents prove nothing about this one."""
     others_seen_at: Optional[float] = None
+    siblings = _sibling_prefix(topic)
 
     def found():
         nonlocal others_seen_at
@@ -72,7 +84,7 @@ def _find_listener(tool: ToolNode, topic: str, agent: str, wait: float) -> str:
             types = dict(tool.node.get_topic_names_and_types()).get(topic)
             if types:
                 return types[0]
-        if others_seen_at is None and _cmd_vel_listeners(tool):
+        if others_seen_at is None and any(name.startswith(siblings) for name in _cmd_vel_listeners(tool)):
             others_seen_at = time.monotonic()
         if others_seen_at is not None and time.monotonic() - others_seen_at > MISSING_AFTER_S:
             return ""  # the node is there, this agent is not
