@@ -12,6 +12,8 @@ of small tensor calls; on a GPU the same graphs are what CUDA graphs capture).
 from __future__ import annotations
 
 import functools
+import inspect
+import logging
 import re
 import sys
 import types
@@ -20,6 +22,9 @@ from typing import Callable, Dict, Hashable, Optional, Sequence
 import torch
 
 from vmas_ros.simulator.background_compile import BackgroundCompiler, copy_inputs
+from vmas_ros.simulator.direct_graph import DirectGraph, NotTraceable, rebuild
+
+_log = logging.getLogger("vmas_ros")
 
 __all__ = ["compile_failed", "own_copy", "compile_for_world", "LayoutCompiled", "StateFunction", "WorldKernel"]
 
@@ -124,10 +129,11 @@ class _OneGraph:
     """
 
     def __init__(self, fn: Callable, mode: Optional[str], guard_filter: Callable,
-                 background: Optional[BackgroundCompiler] = None) -> None:
-        self._fn, self._mode = fn, mode
-        self._compiled = torch.compile(own_copy(fn), dynamic=False, mode=mode, fullgraph=True,
-                                       options={"guard_filter_fn": guard_filter})
+                 background: Optional[BackgroundCompiler] = None, varying: Optional[Sequence[int]] = None) -> None:
+        self._fn, self._mode, self._guard_filter = fn, mode, guard_filter
+        #: the direct graph while it serves; None once it declined (torch.compile from then on)
+        self._direct: Optional[DirectGraph] = DirectGraph(fn, varying) if mode is None else None
+        self._compiled: Optional[Callable] = None  # torch.compile's copy, made only if needed
         self.one_graph: Optional[bool] = None  # known after the first call
         self._background = background
         self._eager_until_compiled = background is not None
@@ -154,7 +160,25 @@ class _OneGraph:
         # (on the compile thread) ready: compiled from the world's switch on; a failed compile stays eager
         self._ready = ok
 
+    @property
+    def direct(self) -> bool:
+        """Whether calls go straight to the compiled code (:mod:`~vmas_ros.simulator.direct_graph`)."""
+        return self._direct is not None and self.one_graph is True
+
     def _compiled_call(self, *args, **kwargs):
+        if self._direct is not None:
+            try:
+                if kwargs:
+                    raise NotTraceable("keyword arguments")
+                compiled, tensors, output = self._direct.prepare(*args)
+                self.one_graph = True
+                return rebuild(output, iter(compiled(*tensors)))
+            except NotTraceable as why:
+                _log.debug("vmas_ros: %s compiles through torch.compile: %s", getattr(self._fn, "__name__", self._fn), why)
+                self._direct, self.one_graph = None, None
+        if self._compiled is None:
+            self._compiled = torch.compile(own_copy(self._fn), dynamic=False, mode=self._mode, fullgraph=True,
+                                           options={"guard_filter_fn": self._guard_filter})
         if self.one_graph is False:
             return self._compiled(*args, **kwargs)
         try:
@@ -178,9 +202,10 @@ class LayoutCompiled:
     world rebuilds its tables (a new object) whenever an
     entity or a property changes, and its step parameters are plain values.
     So ``key(*args)`` names the layout, each layout gets its own compiled
-    copy, and its guards are cut to the shapes, dtypes and devices of the
-    ``checked`` arguments (the state and the actions) plus the process-wide
-    ones (grad mode, default device). Tensors reached through the other
+    copy, and what it checks is cut to the shapes, strides, dtypes and devices
+    of the ``checked`` arguments (the state and the actions; named by
+    parameter, a trailing dot for their attributes), plus, through
+    torch.compile, the process-wide guards (grad mode, default device). Tensors reached through the other
     arguments are still read afresh on every call; Python values there are
     part of the layout. Only the copies of the current tables are kept.
     """
@@ -189,6 +214,9 @@ class LayoutCompiled:
                  background: Optional[BackgroundCompiler] = None) -> None:
         self._fn, self._mode, self._key, self._background = fn, mode, key, background
         self._filter = _guards_on(checked)
+        # the checked arguments' positions: a direct graph flattens and checks only those
+        names = list(inspect.signature(fn).parameters)
+        self._varying = tuple(names.index(name.rstrip(".")) for name in checked)
         self._owner: object = None  # what the cached copies were compiled for (the world's tables)
         self._copies: Dict[Hashable, Callable] = {}
 
@@ -198,7 +226,8 @@ class LayoutCompiled:
         key = self._key(*args)
         compiled = self._copies.get(key)
         if compiled is None:
-            compiled = self._copies[key] = _OneGraph(self._fn, self._mode, self._filter, self._background)
+            compiled = self._copies[key] = _OneGraph(self._fn, self._mode, self._filter, self._background,
+                                                     self._varying)
         return compiled(*args)
 
 

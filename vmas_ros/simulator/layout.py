@@ -25,6 +25,7 @@ from typing import Sequence, Tuple
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.tracing import tracing
 _LITTLE_ENDIAN = sys.byteorder == "little"
 
 
@@ -85,7 +86,7 @@ def join_xy(x: Tensor, y: Tensor) -> Tensor:
 
     Under ``torch.compile`` a plain stack, which the compiler fuses into its loops.
     """
-    if torch.compiler.is_dynamo_compiling():
+    if tracing():
         return torch.stack([x, y], dim=-1)
     if x.dtype in (torch.float32, torch.float64) and y.dtype == x.dtype and x.shape == y.shape:
         return torch.view_as_real(torch.complex(x, y))
@@ -102,7 +103,7 @@ def cat_columns(parts: Sequence[Tensor], leading: Sequence[int]) -> Tensor:
     compiler fuses (strided column writes compile to a scalar loop).
     """
     leading = tuple(leading)
-    if torch.compiler.is_dynamo_compiling():
+    if tracing():
         return torch.cat([part.expand(*leading, part.shape[-1]) for part in parts], dim=-1)
     out = parts[0].new_empty(*leading, sum(part.shape[-1] for part in parts))
     column = 0
@@ -135,6 +136,6 @@ def complex_pairs(x: Tensor, y: Tensor) -> Tensor:
     vectors (:func:`join_xy`): the compiler fuses a stack into its loops and
     would leave complex numbers to ATen.
     """
-    if torch.compiler.is_dynamo_compiling():
+    if tracing():
         return join_xy(x, y)
     return torch.complex(x, y)

@@ -14,6 +14,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator import geometry as geo
+from vmas_ros.simulator.tracing import tracing
 
 __all__ = ["mask_eq", "mask_ge", "mask_gt", "mask_le", "mask_lt", "mask_ne", "select", "zero_like"]
 
@@ -68,6 +69,6 @@ _ZEROS: dict = {}
 def _broadcast_shape(a: Tensor, b) -> Tuple[int, ...]:
     if not isinstance(b, Tensor) or b.shape == a.shape:
         return tuple(a.shape)
-    if torch.compiler.is_dynamo_compiling():  # the plain-Python loop breaks the compiled graph
+    if tracing():  # the plain-Python loop breaks the compiled graph
         return tuple(torch.broadcast_shapes(a.shape, b.shape))
     return geo.broadcast_shape(a.shape, b.shape)

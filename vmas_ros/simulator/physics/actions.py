@@ -20,6 +20,7 @@ from vmas_ros.simulator.physics.forces import clamp_norm
 from vmas_ros.simulator.physics.integrator import differentiable
 from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.tables import WorldTables
+from vmas_ros.simulator.tracing import tracing
 
 __all__ = ["agents_action_input", "assemble_actions", "hold_agents", "limit_actions"]
 
@@ -35,13 +36,13 @@ def assemble_actions(q: Tensor, tables: WorldTables, forces, torques) -> Tensor:
         return actions
     rows = actions[:, tables.n_entities - n_agents:]  # the agents' [3, A, B] block (landmarks stay zero)
     if isinstance(forces, (list, tuple)):
-        if not torch.compiler.is_dynamo_compiling() and not differentiable(*forces, *torques):
+        if not tracing() and not differentiable(*forces, *torques):
             # each agent's force and torque stacked straight into its rows (no stacks of the batch)
             stack_into(forces, rows[:2])
             stack_into(torques, rows[2:])
             return actions
         forces, torques = torch.stack(forces), torch.stack(torques)
-    if q.numel() <= SMALL_BATCH_ELEMENTS or torch.compiler.is_dynamo_compiling():
+    if q.numel() <= SMALL_BATCH_ELEMENTS or tracing():
         # few elements: each call's fixed cost dominates; one strided copy (and the compiler's choice)
         rows[:2].copy_(forces.permute(2, 0, 1))
     else:

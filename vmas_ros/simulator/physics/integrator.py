@@ -23,6 +23,7 @@ from vmas_ros.simulator.geometry import norm_xy
 from vmas_ros.simulator.masks import mask_gt, select
 from vmas_ros.simulator.physics.constants import StepConstants
 from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
+from vmas_ros.simulator.tracing import tracing
 
 __all__ = ["Hold", "differentiable", "hold_method", "integrate", "substep"]
 
@@ -60,7 +61,7 @@ def substep(q: Tensor, v: Tensor, v0: Tensor, force: Tensor, c: StepConstants, h
     """
     if hold is Hold.BLOCK:
         lo, hi = c.free_span
-        if differentiable(q, v, force) or torch.compiler.is_dynamo_compiling():
+        if differentiable(q, v, force) or tracing():
             # (compiled: the cat, which the compiler fuses; out= into row slices would break its graph)
             free_q, free_v = integrate(q[:, lo:hi], v[:, lo:hi], force[:, lo:hi], c.free_block, first)
             q = torch.cat([q[:, :lo], free_q] if lo else [free_q, q[:, hi:]], dim=1)

@@ -16,6 +16,7 @@ from torch import Tensor
 from vmas_ros.simulator.thresholds import (
     GEMM_SCATTER_MAX_CELLS, GEMM_SCATTER_MIN_PAIRS, SCATTER_TRANSPOSE_BELOW,
 )
+from vmas_ros.simulator.tracing import tracing
 
 __all__ = ["add_pairs", "add_pairs_opposite", "scatter_by_gemm", "scatter_rows"]
 
@@ -32,7 +33,7 @@ def scatter_by_gemm(n_entities: int, n_pairs: int, batch: int) -> bool:
     """
     if n_entities * n_pairs > GEMM_SCATTER_MAX_CELLS:
         return False
-    return (torch.compiler.is_dynamo_compiling() or batch < SCATTER_TRANSPOSE_BELOW
+    return (tracing() or batch < SCATTER_TRANSPOSE_BELOW
             or (n_pairs >= GEMM_SCATTER_MIN_PAIRS and torch.get_num_threads() > 1))
 
 
@@ -45,13 +46,13 @@ def add_pairs(force: Tensor, table, on_a: Tensor, on_b: Tensor) -> None:
     float rounding only, and scatter with a GEMM.
     """
     n_entities, n_pairs = force.shape[1], on_a.shape[1]
-    if torch.compiler.is_dynamo_compiling() and n_entities * n_pairs <= GEMM_SCATTER_MAX_CELLS:
+    if tracing() and n_entities * n_pairs <= GEMM_SCATTER_MAX_CELLS:
         first, second = table.incidence_ab(n_entities, force.dtype)
         force.baddbmm_(first.expand(force.shape[0], -1, -1), on_a)
         force.baddbmm_(second.expand(force.shape[0], -1, -1), on_b)
         return
     values = torch.stack([on_a, on_b], dim=2).flatten(1, 2)
-    if torch.compiler.is_dynamo_compiling():  # too many (entity, pair) cells for a dense matrix
+    if tracing():  # too many (entity, pair) cells for a dense matrix
         scatter_rows(force, table.index_ab, values)
     elif force.shape[-1] < SCATTER_TRANSPOSE_BELOW:
         # few envs: along dim 0 of the transposed view, index_add_ runs as one loop
@@ -71,7 +72,7 @@ def add_pairs_opposite(force: Tensor, table, on_a: Tensor) -> None:
     if scatter_by_gemm(n_entities, n_pairs, batch):
         signed = table.incidence_opposite(n_entities, force.dtype)
         force.baddbmm_(signed.expand(force.shape[0], -1, -1), on_a)
-    elif torch.compiler.is_dynamo_compiling():  # too many (entity, pair) cells for a dense matrix
+    elif tracing():  # too many (entity, pair) cells for a dense matrix
         scatter_rows(force, table.index_a, on_a)
         scatter_rows(force, table.index_b, on_a.neg())
     elif batch < SCATTER_TRANSPOSE_BELOW:

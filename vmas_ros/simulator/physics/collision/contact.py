@@ -26,6 +26,7 @@ from torch import Tensor
 
 from vmas_ros.simulator.geometry import norm_xy
 from vmas_ros.simulator.masks import mask_eq, mask_ge, mask_le, select, zero_like
+from vmas_ros.simulator.tracing import tracing
 
 #: below this centre distance a contact (or joint) exerts no force: its direction is undefined
 MIN_CONTACT_DIST = 1e-6
@@ -117,7 +118,7 @@ class Pushes:
     def __init__(self, dx: Tensor, dy: Tensor, reach: Tensor, params, length: Callable = norm_xy) -> None:
         near = mask_le(length(dx, dy), reach)
         if params.broad_phase == "batch":
-            near = near_in_any_env(near) if torch.compiler.is_dynamo_compiling() else near.amax(dim=1, keepdim=True)
+            near = near_in_any_env(near) if tracing() else near.amax(dim=1, keepdim=True)
         self.gate, self.length = near, length
         self.strength, self.margin = params.collision_force, params.contact_margin
 
