@@ -26,7 +26,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
         parser.add_argument("benchmark", nargs="?", default="mpe",
                             help="which benchmark: mpe (default; the VMAS paper's Fig. 2), suite (vmas_ros "
                                  "against VMAS on the project's workloads), node (sim_node's steps/s while "
-                                 "publishing) or process (whole short scripts against VMAS: time and memory)")
+                                 "publishing), process (whole short scripts against VMAS: time and memory), "
+                                 "jaxmarl (simple_spread's step against JaxMARL's) or torchrl (TorchRL's "
+                                 "multi-agent PPO loop at its tutorial's size, whole processes against VMAS)")
     # dest is not ``num_envs``: cli.main compares args.num_envs with an int
     parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=list(DEFAULT_NUM_ENVS),
                         metavar="N", help="mpe: numbers of parallel envs (default: 1 10 100 1000)")
@@ -78,6 +80,14 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     process.add_argument("--process-cold-cache", action="store_true",
                          help="process: each vmas_ros process compiles from an empty compile cache of its own "
                               "(a machine's first compile); default: torch's cache as earlier runs left it")
+    jaxmarl = parser.add_argument_group("jaxmarl options (vmas-ros bench jaxmarl)")
+    jaxmarl.add_argument("--jaxmarl-python", default=None, metavar="PATH",
+                         help="jaxmarl: the interpreter of an environment with JaxMARL installed "
+                              "(default: $VMAS_ROS_JAXMARL_PYTHON)")
+    jaxmarl.add_argument("--jaxmarl-envs", type=int, nargs="+", default=None, metavar="N",
+                         help="jaxmarl: numbers of envs (default: 1 30000)")
+    jaxmarl.add_argument("--jaxmarl-steps", type=int, default=None, metavar="N",
+                         help="jaxmarl: timed steps per process (default 2000)")
     from vmas_ros.bench.node import add_node_bench_arguments
 
     add_node_bench_arguments(parser)
@@ -109,6 +119,39 @@ def _run_process(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_jaxmarl(args: argparse.Namespace) -> int:
+    """``vmas-ros bench jaxmarl``: simple_spread against JaxMARL, alternating processes (:mod:`vmas_ros.bench.jaxmarl`)."""
+    from vmas_ros.bench import jaxmarl
+
+    try:
+        python = jaxmarl.jaxmarl_python(args.jaxmarl_python)
+        rows = jaxmarl.run_jaxmarl_benchmark(
+            python, args.jaxmarl_envs or jaxmarl.DEFAULT_NUM_ENVS, args.jaxmarl_steps or jaxmarl.DEFAULT_STEPS,
+            args.repeats, progress=not args.no_progress)
+    except ValueError as error:
+        print(f"vmas-ros bench jaxmarl: {error}", file=sys.stderr)
+        return 2
+    print(jaxmarl.format_table(rows))
+    for path in jaxmarl.write_results(rows, args.out).values():
+        print(f"wrote {path}")
+    return 0
+
+
+def _run_torchrl(args: argparse.Namespace) -> int:
+    """``vmas-ros bench torchrl``: TorchRL's PPO loop on vmas_ros and on VMAS (:mod:`vmas_ros.bench.torchrl_loop`)."""
+    from vmas_ros.bench import torchrl_loop
+
+    try:
+        rows = torchrl_loop.run_torchrl_benchmark(args.repeats, progress=not args.no_progress)
+    except ValueError as error:
+        print(f"vmas-ros bench torchrl: {error}", file=sys.stderr)
+        return 2
+    print(torchrl_loop.format_table(rows))
+    for path in torchrl_loop.write_results(rows, args.out).values():
+        print(f"wrote {path}")
+    return 0
+
+
 def run_bench_command(args: argparse.Namespace) -> int:
     """Run the benchmark from parsed ``add_bench_arguments`` options: 0 on success, 2 on bad arguments."""
     # looked up on the module at call time (no import cycle; patches of vmas_ros.bench.mpe apply)
@@ -128,6 +171,10 @@ def run_bench_command(args: argparse.Namespace) -> int:
         return run_suite_command(args)
     if benchmark == "process":
         return _run_process(args)
+    if benchmark == "jaxmarl":
+        return _run_jaxmarl(args)
+    if benchmark == "torchrl":
+        return _run_torchrl(args)
     num_envs = getattr(args, "bench_num_envs", None)
     if num_envs is None:
         num_envs = getattr(args, "num_envs", [1, 10, 100, 1000])
