@@ -14,6 +14,11 @@ from vmas_ros.scenarios import DEBUG_SCENARIOS, MAIN_SCENARIOS, MPE_SCENARIOS, l
 
 __version__ = "0.1.0"
 
+# gymnasium.make("vmas_ros/<scenario>-v0"): registered once gymnasium is loaded, never importing it here
+from vmas_ros.compat.gymnasium_ids import register_when_gymnasium_loads  # noqa: E402
+
+register_when_gymnasium_loads()
+
 #: scenario names in VMAS's three lists (``list_scenarios()`` gives all of them)
 scenarios = list(MAIN_SCENARIOS)
 debug_scenarios = list(DEBUG_SCENARIOS)

@@ -304,6 +304,16 @@ class BaseGymWrapper:
         """The wrapped Environment, as in VMAS (not the wrapper itself)."""
         return self._env
 
+    @property
+    def spec(self) -> Any:
+        """gymnasium's ``EnvSpec`` of this env, kept on the Environment: ``gymnasium.make`` and ``make_vec``
+        write it to ``env.unwrapped`` (the Environment here) and then read ``env.spec`` back."""
+        return getattr(self._env, "spec", None)
+
+    @spec.setter
+    def spec(self, value: Any) -> None:
+        self._env.spec = value
+
     def _convert(self, value: Any) -> Any:
         """Tensors (nested) to the output type: row 0 of the batch unless vectorized."""
         index = None if self.vectorized else 0
