@@ -10,13 +10,22 @@ from pathlib import Path
 
 import pytest
 
-from test.compat.vmas_names import VMAS_MODULES, missing, ours
+from test.compat.vmas_names import VMAS_MODULES, missing, missing_module_names, ours, vmas_scenario_modules
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "vmas_compat.md"
 
 _IMPORTED = "names VMAS's module imports for its own use; import them from their home modules"
 _ENGINE = "engine internals: our world is struct-of-arrays, entities are views into batched tensors"
 _INTEGRATORS = "the dynamics integrate in their own private helpers, not these public methods"
+#: VMAS's road_traffic module's own classes and helpers
+_ROAD_TRAFFIC_INTERNALS = " ".join([
+    "Parameters Normalizers Rewards Penalties Thresholds ReferencePathsMapRelated ReferencePathsAgentRelated",
+    "Distances Timer Collisions Constants CircularBuffer StateBuffer InitialStateBuffer Observations",
+    "parse_point parse_bound get_center_length_yaw_polyline parse_lanelet parse_intersections get_map_data",
+    "get_rectangle_vertices get_perpendicular_distances get_short_term_reference_path exponential_decreasing_fcn",
+    "get_distances_between_agents interX transform_from_global_to_local_coordinate angle_eliminate_two_pi",
+    "get_reference_lanelet_index calculate_reference_path get_reference_paths",
+])
 _ROWS = [  # (VMAS module, top-level names, reason): deliberate differences; "*" covers a whole module
     ("vmas.interactive_rendering", "*", "keyboard player is ours (pygame, not pyglet); render_interactively adds steps/fps"),
     ("vmas.make_env", "make_env", "ours adds compile_physics (by default eager, then compiled once a run is "
@@ -57,6 +66,11 @@ _ROWS = [  # (VMAS module, top-level names, reason): deliberate differences; "*"
     ("vmas.simulator.environment.gym.gym", "BaseGymWrapper Environment", _IMPORTED),
     ("vmas.examples.use_vmas_env", "Agent", _IMPORTED),
     ("vmas.examples.rllib", "*", "VMAS's script needs ray and wandb; ours points at vmas_ros/envs/rllib_env.py"),
+    ("vmas.scenarios.football", "AgentPolicy Splines ball_action_script",
+     "football's AI is ours (vmas_ros/scenarios/football_ai.py), with classes and a ball script of its own"),
+    ("vmas.scenarios.road_traffic", _ROAD_TRAFFIC_INTERNALS,
+     "road_traffic's internals: ours reads the same map and gives the same observations and rewards, built "
+     "from modules of its own (vmas_ros/scenarios/road_traffic/)"),
 ]
 #: (VMAS module, top-level name) -> reason
 ALLOWED = {(module, name): reason for module, names, reason in _ROWS for name in names.split()}
@@ -72,6 +86,18 @@ def _allowed(line: str) -> bool:
 def test_every_vmas_name_exists_at_the_same_path(vmas_path):
     unexplained = sorted(line for line in missing(vmas_path) if not _allowed(line))
     assert not unexplained, f"{ours(vmas_path)} lacks VMAS's:\n" + "\n".join(unexplained)
+
+
+@pytest.mark.parametrize("vmas_path", vmas_scenario_modules())
+def test_every_scenario_modules_own_names_exist_at_the_same_path(vmas_path):
+    """Module-level constants and helpers of VMAS's scenario modules (``DEFAULT_ENERGY_COEFF``, the angle
+    helpers): VMAS code imports them from the scenario's module."""
+    unexplained = sorted(line for line in missing_module_names(vmas_path) if not _allowed(line))
+    assert not unexplained, f"{ours(vmas_path)} lacks VMAS's:\n" + "\n".join(unexplained)
+
+
+def test_the_scenario_modules_are_all_compared():
+    assert len(vmas_scenario_modules()) >= 40
 
 
 def test_allowlist_is_the_one_in_the_docs():

@@ -190,3 +190,37 @@ def missing(vmas_path: str) -> Set[str]:
     """Lines of VMAS's surface at ``vmas_path`` that vmas_ros's module at the same path lacks or spells differently."""
     theirs, homes = vmas_surface(vmas_path)
     return theirs - ours_surface(vmas_path, homes, top_names(theirs))
+
+
+def vmas_scenario_modules() -> list:
+    """Every module of VMAS 1.5.2's ``vmas.scenarios`` package (found on disk, not imported)."""
+    import importlib.util
+    import pkgutil
+
+    spec = importlib.util.find_spec("vmas.scenarios")
+    if spec is None:
+        return []
+    return sorted(module.name for module in pkgutil.walk_packages(spec.submodule_search_locations, "vmas.scenarios."))
+
+
+def module_level_names(vmas_path: str) -> Set[str]:
+    """The public names a VMAS module defines itself (functions, classes, assignments at module level), read
+    from its source: what it imports for its own use is not its surface."""
+    import importlib.util
+
+    origin = importlib.util.find_spec(vmas_path).origin
+    names: Set[str] = set()
+    for node in ast.parse(Path(origin).read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign):
+            names.update(target.id for target in node.targets if isinstance(target, ast.Name))
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            names.add(node.target.id)
+    return {name for name in names if not name.startswith("_")}
+
+
+def missing_module_names(vmas_path: str) -> Set[str]:
+    """``"<vmas path>: <name>"`` for each name of :func:`module_level_names` that vmas_ros's module lacks."""
+    module = importlib.import_module(ours(vmas_path))
+    return {f"{vmas_path}: {name}" for name in module_level_names(vmas_path) if not hasattr(module, name)}

@@ -44,8 +44,10 @@ AGENT_RADIUS = 0.05
 GOAL_RADIUS = 0.03
 SPAWN_GAP = AGENT_RADIUS + GOAL_RADIUS + 0.01
 SPAWN_BOUND = 1.0
+#: the energy penalty's default weight (VMAS's module exports it under this name)
+DEFAULT_ENERGY_COEFF = 0.02
 #: name -> default of every kwarg
-DEFAULTS = {"n_agents": 4, "energy_coeff": 0.02, "start_same_point": False}
+DEFAULTS = {"n_agents": 4, "energy_coeff": DEFAULT_ENERGY_COEFF, "start_same_point": False}
 
 
 class Scenario(BaseScenario):

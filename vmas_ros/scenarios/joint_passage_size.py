@@ -73,6 +73,9 @@ from vmas_ros.scenarios.joint_passage_common import (
     AGENT_RADIUS, N_BLOCKS, JointPassageBase, JointPassageHeuristic, heading_gap, line_angle_gap,
     slot_positions, validate_common,
 )
+from vmas_ros.scenarios.line_angles import (  # noqa: F401  VMAS's names for its users
+    angle_to_vector, get_line_angle_0_90, get_line_angle_0_180, get_line_angle_dist_0_180, get_line_angle_dist_0_360,
+)
 from vmas_ros.simulator.core import Agent, Sphere
 
 NAME = "joint_passage_size"

@@ -49,6 +49,9 @@ from torch import Tensor
 from vmas_ros.scenarios.common import (
     check_number, configure, continuous_heuristic_kwargs, for_index, selected_rows,
 )
+from vmas_ros.scenarios.line_angles import (  # noqa: F401  VMAS's names for its users
+    angle_to_vector, get_line_angle_0_90, get_line_angle_0_180, get_line_angle_dist_0_180, get_line_angle_dist_0_360,
+)
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.joints import Joint
