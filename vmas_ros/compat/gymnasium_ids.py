@@ -57,21 +57,26 @@ class _RegisterAfterImport(importlib.abc.MetaPathFinder):
     """Finds nothing itself: when ``gymnasium`` is imported, it wraps the real loader so that the ids are
     registered once gymnasium's module has run, then steps out of the import system."""
 
+    def __init__(self) -> None:
+        self._used = False
+
     def find_spec(self, name: str, path=None, target=None) -> Optional[importlib.machinery.ModuleSpec]:
-        if name != "gymnasium":
+        if name != "gymnasium" or self._used:
             return None
-        sys.meta_path.remove(self)
+        self._used = True
         spec = importlib.machinery.PathFinder.find_spec(name, path)
         if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
             return spec
-        loader = spec.loader
-        run = loader.exec_module
+        run = spec.loader.exec_module
 
         def exec_module(module) -> None:
             run(module)
+            # (the import system iterates sys.meta_path while it finds a spec: leave only once it is done)
+            if self in sys.meta_path:
+                sys.meta_path.remove(self)
             _register()
 
-        loader.exec_module = exec_module  # this loader instance serves this one import only
+        spec.loader.exec_module = exec_module  # this loader instance serves this one import only
         return spec
 
 
