@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from vmas_ros.bench import jaxmarl
+from vmas_ros.bench import jaxmarl_bench as jaxmarl
 from vmas_ros.bench.cli import parse_bench_args, run_bench_command
 
 

@@ -120,8 +120,8 @@ def _run_process(args: argparse.Namespace) -> int:
 
 
 def _run_jaxmarl(args: argparse.Namespace) -> int:
-    """``vmas-ros bench jaxmarl``: simple_spread against JaxMARL, alternating processes (:mod:`vmas_ros.bench.jaxmarl`)."""
-    from vmas_ros.bench import jaxmarl
+    """``vmas-ros bench jaxmarl``: simple_spread against JaxMARL, alternating processes (:mod:`vmas_ros.bench.jaxmarl_bench`)."""
+    from vmas_ros.bench import jaxmarl_bench as jaxmarl
 
     try:
         python = jaxmarl.jaxmarl_python(args.jaxmarl_python)

@@ -13,8 +13,14 @@ one ``block_until_ready`` after the last step (JAX runs asynchronously).
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
+
+# run as a script, its folder (vmas_ros/bench/) would come first on sys.path and shadow libraries by its
+# modules' names: leave it out
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
 
 
 def main(config: dict) -> dict:

@@ -18,8 +18,14 @@ and the last iteration's mean episode reward.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
+
+# run as a script, its folder (vmas_ros/bench/) would come first on sys.path and shadow libraries by its
+# modules' names: leave it out
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
 
 CONFIG = dict(scenario="navigation", n_agents=3, max_steps=100, frames_per_batch=6_000, n_iters=10, num_epochs=30,
               minibatch_size=400, lr=3e-4, max_grad_norm=1.0, clip_epsilon=0.2, gamma=0.99, lmbda=0.9,
