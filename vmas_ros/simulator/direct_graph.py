@@ -7,8 +7,8 @@ machinery: each is a pure function of its tensor arguments for a layout the
 caller names (:class:`vmas_ros.simulator.compiling.LayoutCompiled`). So
 :class:`DirectGraph` traces such a function once per input signature into an
 FX graph of ATen ops (``make_fx``, on fake tensors), compiles that graph with
-inductor (``compile_fx``, the same compiler and disk cache torch.compile
-uses), and calls the compiled code directly. Its only per-call work is
+inductor (``standalone_compile``: the same compiler and disk caches
+torch.compile uses), and calls the compiled code directly. Its only per-call work is
 flattening the arguments and checking their shapes, strides, dtypes and
 devices against the signature it compiled for.
 
@@ -183,7 +183,7 @@ class DirectGraph:
         return rebuild(output, iter(compiled(*tensors)))
 
     def _compile(self, args: tuple, structure, tensors: List[torch.Tensor]) -> Tuple[Callable, object]:
-        from torch._inductor.compile_fx import compile_fx
+        from torch._inductor import standalone_compile
         from torch.fx.experimental.proxy_tensor import make_fx
 
         # one eager call on copies first, taking the graph-friendly forms as the trace will: it fills what
@@ -211,7 +211,9 @@ class DirectGraph:
                for node in graph_module.graph.nodes if node.op == "get_attr") and torch.is_grad_enabled():
             raise NotTraceable("autograd must see a constant it reads")
         try:
-            compiled = compile_fx(graph_module, list(tensors))
+            # (fixed shapes; standalone_compile gives inductor the shape environment its disk caches need)
+            compiled = standalone_compile(graph_module, list(tensors), dynamic_shapes="from_example_inputs",
+                                          options={})
         except Exception as error:  # no working compiler, say: torch.compile then meets it and says so
             raise NotTraceable(f"compiling failed: {type(error).__name__}: {error}") from error
         global _compiled_count
