@@ -211,9 +211,10 @@ class DirectGraph:
                for node in graph_module.graph.nodes if node.op == "get_attr") and torch.is_grad_enabled():
             raise NotTraceable("autograd must see a constant it reads")
         try:
-            # (fixed shapes; standalone_compile gives inductor the shape environment its disk caches need)
+            # fixed shapes; standalone_compile gives inductor the shape environment its disk caches need. The
+            # graph is handed over, not copied: a copy would hold copies of the constants, no longer read afresh
             compiled = standalone_compile(graph_module, list(tensors), dynamic_shapes="from_example_inputs",
-                                          options={})
+                                          options={}, donate_graph_module=True)
         except Exception as error:  # no working compiler, say: torch.compile then meets it and says so
             raise NotTraceable(f"compiling failed: {type(error).__name__}: {error}") from error
         global _compiled_count
