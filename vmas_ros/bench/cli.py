@@ -101,55 +101,46 @@ def parse_bench_args(argv) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def _report(name: str, module, run) -> int:
+    """Run ``run()`` for ``vmas-ros bench NAME``, print ``module.format_table`` of its rows and write them with
+    ``module.write_results`` to ``--out``: 0, or 2 with the message when ``run`` refuses its options."""
+    try:
+        rows, out = run()
+    except ValueError as error:
+        print(f"vmas-ros bench {name}: {error}", file=sys.stderr)
+        return 2
+    print(module.format_table(rows))
+    for path in module.write_results(rows, out).values():
+        print(f"wrote {path}")
+    return 0
+
+
 def _run_process(args: argparse.Namespace) -> int:
     """``vmas-ros bench process``: whole processes of vmas_ros and VMAS, alternating (:mod:`vmas_ros.bench.process`)."""
     from vmas_ros.bench import process
 
-    try:
-        rows = process.run_process_benchmark(
-            args.process_workloads or process.DEFAULT_WORKLOADS, args.process_steps or process.DEFAULT_STEPS,
-            args.repeats, mode=args.process_mode, threads=args.threads, progress=not args.no_progress,
-            cold_cache=args.process_cold_cache)
-    except ValueError as error:
-        print(f"vmas-ros bench process: {error}", file=sys.stderr)
-        return 2
-    print(process.format_table(rows))
-    for path in process.write_results(rows, args.out).values():
-        print(f"wrote {path}")
-    return 0
+    return _report("process", process, lambda: (process.run_process_benchmark(
+        args.process_workloads or process.DEFAULT_WORKLOADS, args.process_steps or process.DEFAULT_STEPS,
+        args.repeats, mode=args.process_mode, threads=args.threads, progress=not args.no_progress,
+        cold_cache=args.process_cold_cache), args.out))
 
 
 def _run_jaxmarl(args: argparse.Namespace) -> int:
-    """``vmas-ros bench jaxmarl``: simple_spread against JaxMARL, alternating processes (:mod:`vmas_ros.bench.jaxmarl_bench`)."""
+    """``vmas-ros bench jaxmarl``: simple_spread against JaxMARL, alternating processes
+    (:mod:`vmas_ros.bench.jaxmarl_bench`)."""
     from vmas_ros.bench import jaxmarl_bench as jaxmarl
 
-    try:
-        python = jaxmarl.jaxmarl_python(args.jaxmarl_python)
-        rows = jaxmarl.run_jaxmarl_benchmark(
-            python, args.jaxmarl_envs or jaxmarl.DEFAULT_NUM_ENVS, args.jaxmarl_steps or jaxmarl.DEFAULT_STEPS,
-            args.repeats, progress=not args.no_progress)
-    except ValueError as error:
-        print(f"vmas-ros bench jaxmarl: {error}", file=sys.stderr)
-        return 2
-    print(jaxmarl.format_table(rows))
-    for path in jaxmarl.write_results(rows, args.out).values():
-        print(f"wrote {path}")
-    return 0
+    return _report("jaxmarl", jaxmarl, lambda: (jaxmarl.run_jaxmarl_benchmark(
+        jaxmarl.jaxmarl_python(args.jaxmarl_python), args.jaxmarl_envs or jaxmarl.DEFAULT_NUM_ENVS,
+        args.jaxmarl_steps or jaxmarl.DEFAULT_STEPS, args.repeats, progress=not args.no_progress), args.out))
 
 
 def _run_torchrl(args: argparse.Namespace) -> int:
     """``vmas-ros bench torchrl``: TorchRL's PPO loop on vmas_ros and on VMAS (:mod:`vmas_ros.bench.torchrl_loop`)."""
     from vmas_ros.bench import torchrl_loop
 
-    try:
-        rows = torchrl_loop.run_torchrl_benchmark(args.repeats, progress=not args.no_progress)
-    except ValueError as error:
-        print(f"vmas-ros bench torchrl: {error}", file=sys.stderr)
-        return 2
-    print(torchrl_loop.format_table(rows))
-    for path in torchrl_loop.write_results(rows, args.out).values():
-        print(f"wrote {path}")
-    return 0
+    return _report("torchrl", torchrl_loop,
+                   lambda: (torchrl_loop.run_torchrl_benchmark(args.repeats, progress=not args.no_progress), args.out))
 
 
 def run_bench_command(args: argparse.Namespace) -> int:

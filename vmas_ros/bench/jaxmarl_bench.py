@@ -122,9 +122,7 @@ def format_table(rows: List[dict]) -> str:
 
 
 def write_results(rows: List[dict], out: str) -> Dict[str, Path]:
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = {"json": folder / "jaxmarl.json", "md": folder / "jaxmarl.md"}
-    paths["json"].write_text(json.dumps(rows, indent=1))
-    paths["md"].write_text(format_table(rows) + "\n")
-    return paths
+    """``jaxmarl.md`` and ``jaxmarl.json`` in ``out``."""
+    from vmas_ros.bench.report import write_table_and_rows
+
+    return write_table_and_rows(rows, out, "jaxmarl", format_table(rows))

@@ -151,13 +151,11 @@ def format_table(rows: List[dict]) -> str:
 
 def write_results(rows: List[dict], out: str) -> Dict[str, Path]:
     """``process.md``, ``process.json`` and (with matplotlib) ``process.png`` in ``out``."""
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = {"md": folder / "process.md", "json": folder / "process.json"}
-    paths["md"].write_text(format_table(rows) + "\n")
-    paths["json"].write_text(json.dumps(rows, indent=1))
-    if _plot(rows, folder / "process.png"):
-        paths["png"] = folder / "process.png"
+    from vmas_ros.bench.report import write_table_and_rows
+
+    paths = write_table_and_rows(rows, out, "process", format_table(rows))
+    if _plot(rows, Path(out) / "process.png"):
+        paths["png"] = Path(out) / "process.png"
     return paths
 
 

@@ -322,3 +322,14 @@ def write_results(rows: Sequence[dict], out_dir, plot: bool = True) -> Dict[str,
         paths["png"] = out / "mpe_benchmark.png"
         _plot(rows, paths["png"], info)
     return paths
+
+
+def write_table_and_rows(rows: List[dict], out: str, stem: str, table: str) -> Dict[str, Path]:
+    """``<stem>.md`` (``table``) and ``<stem>.json`` (every row) in ``out``, created if needed: what the
+    process, torchrl and jaxmarl benchmarks write."""
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {"md": folder / f"{stem}.md", "json": folder / f"{stem}.json"}
+    paths["md"].write_text(table + "\n")
+    paths["json"].write_text(json.dumps(rows, indent=1))
+    return paths

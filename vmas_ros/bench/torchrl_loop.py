@@ -76,9 +76,7 @@ def format_table(rows: List[dict]) -> str:
 
 
 def write_results(rows: List[dict], out: str) -> Dict[str, Path]:
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = {"json": folder / "torchrl_loop.json", "md": folder / "torchrl_loop.md"}
-    paths["json"].write_text(json.dumps(rows, indent=1))
-    paths["md"].write_text(format_table(rows) + "\n")
-    return paths
+    """``torchrl_loop.md`` and ``torchrl_loop.json`` in ``out``."""
+    from vmas_ros.bench.report import write_table_and_rows
+
+    return write_table_and_rows(rows, out, "torchrl_loop", format_table(rows))
