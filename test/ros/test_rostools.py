@@ -99,8 +99,10 @@ def test_drive_moves_the_agent_as_asked_in_five_fresh_processes(ros, realtime):
         match = re.fullmatch(r"sent (\d+) Twists to /agent_0/cmd_vel \(1 subscriber\) over (\S+) s, "
                              r"then a zero Twist\n", done.stdout)
         assert match, done.stdout
-        # the report gives the measured wall time: a loaded machine can stall the last wait a little
-        assert 38 <= int(match[1]) <= 41 and abs(float(match[2]) - 2.0) < 0.3
+        # the report gives the measured wall time. A loaded machine can stall a spin past the end of
+        # the drive, and the commands that stall skipped are not sent late: the distance below, which
+        # the held last command keeps growing, is the check on what the agent did
+        assert 30 <= int(match[1]) <= 41 and abs(float(match[2]) - 2.0) < 0.3
         ros.spin_for(0.5)  # the zero command stops the agent within a step or two
         end = _position(poses)
         distances.append(math.dist(start, end))
