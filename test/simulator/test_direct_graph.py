@@ -65,3 +65,20 @@ def test_inputs_that_autograd_must_see_are_declined():
     x = torch.ones(3, requires_grad=True)
     with pytest.raises(NotTraceable, match="autograd"):
         DirectGraph(lambda t: t * 2)(x)
+
+
+def _add(x, pair):
+    return x * 2 + (pair[0] - pair[1] if isinstance(pair, tuple) else pair)
+
+
+def test_arguments_of_a_new_structure_get_code_of_their_own(device):
+    """The arguments are taken apart by code written for their structure; another structure (a tensor
+    where a tuple was) is walked, compiled for and becomes the route, and the first still runs its own."""
+    direct = DirectGraph(_add)
+    x, a, b = (torch.rand(4, device=device) for _ in range(3))
+    before = graphs_compiled()
+    torch.testing.assert_close(direct(x, (a, b)), x * 2 + a - b)
+    torch.testing.assert_close(direct(x, a), x * 2 + a)
+    torch.testing.assert_close(direct(x, (b, a)), x * 2 + b - a)
+    torch.testing.assert_close(direct(x, b), x * 2 + b)
+    assert graphs_compiled() == before + 2 and len(direct._graphs) == 2

@@ -22,7 +22,7 @@ from typing import Callable, Dict, Hashable, Optional, Sequence
 import torch
 
 from vmas_ros.simulator.background_compile import BackgroundCompiler, copy_inputs
-from vmas_ros.simulator.direct_graph import DirectGraph, NotTraceable, rebuild
+from vmas_ros.simulator.direct_graph import DirectGraph, NotTraceable
 
 _log = logging.getLogger("vmas_ros")
 
@@ -170,9 +170,9 @@ class _OneGraph:
             try:
                 if kwargs:
                     raise NotTraceable("keyword arguments")
-                compiled, tensors, output = self._direct.prepare(*args)
+                compiled, tensors, build = self._direct.prepare(*args)
                 self.one_graph = True
-                return rebuild(output, iter(compiled(*tensors)))
+                return build(compiled(*tensors))
             except NotTraceable as why:
                 _log.debug("vmas_ros: %s compiles through torch.compile: %s", getattr(self._fn, "__name__", self._fn), why)
                 self._direct, self.one_graph = None, None

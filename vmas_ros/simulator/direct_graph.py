@@ -31,6 +31,8 @@ from typing import Callable, Dict, Hashable, List, Optional, Sequence, Tuple
 import torch
 
 from vmas_ros.simulator.background_compile import copy_inputs
+from vmas_ros.simulator.structure_code import TENSOR as _TENSOR
+from vmas_ros.simulator.structure_code import builder, picker
 from vmas_ros.simulator.tracing import traced
 
 __all__ = ["DirectGraph", "NotTraceable", "graphs_compiled", "rebuild"]
@@ -49,9 +51,11 @@ class NotTraceable(Exception):
     """The function cannot be run as a direct graph; compile it the usual way."""
 
 
+#: inductor's settings for a direct graph: no checks of the inputs' sizes and strides in the compiled code,
+#: as the signature each graph is looked up by already pins them
+_OPTIONS = {"config_patches": {"size_asserts": False}}
 #: compiled signatures per function before it declines: more means its inputs' shapes keep changing
 MAX_SIGNATURES = 8
-_TENSOR = "T"  # a slot for the next tensor in a flattened structure
 _PRIMITIVE = (int, float, bool, str, type(None))
 
 
@@ -148,13 +152,32 @@ class DirectGraph:
     def __init__(self, fn: Callable, varying: Optional[Sequence[int]] = None) -> None:
         self._fn = fn
         self._varying = None if varying is None else tuple(varying)
-        #: signature -> (compiled code, output structure)
-        self._graphs: Dict[Hashable, Tuple[Callable, object]] = {}
+        #: signature -> (compiled code, output builder)
+        self._graphs: Dict[Hashable, Tuple[Callable, Callable]] = {}
+        #: the last structure of arguments seen: (its picker, its tensors' metadata -> graph entry)
+        self._route: Optional[Tuple[Callable, Dict[Hashable, Tuple[Callable, Callable]]]] = None
 
-    def prepare(self, *args) -> Tuple[Callable, List[torch.Tensor], object]:
-        """``(compiled code, its tensor inputs, output structure)`` for a call with ``args``, compiling on a new
-        signature; the caller runs ``rebuild(structure, iter(compiled(*tensors)))`` (:func:`rebuild`), so that
-        no frame of this module stands between it and the compiled code."""
+    def prepare(self, *args) -> Tuple[Callable, List[torch.Tensor], Callable]:
+        """``(compiled code, its tensor inputs, output builder)`` for a call with ``args``, compiling on a new
+        signature; the caller runs ``build(compiled(*tensors))``, so that no frame of this module stands
+        between it and the compiled code.
+
+        The arguments' structure is taken apart by code written for it
+        (:mod:`~vmas_ros.simulator.structure_code`) while it stays the same;
+        a new structure goes through the generic walk, and becomes the route.
+        """
+        route = self._route
+        if route is not None:
+            tensors = route[0](args)
+            if tensors is not None:
+                entry = route[1].get(tuple([(t.shape, t.stride(), t.dtype, t.device) for t in tensors]))
+                if entry is not None:
+                    if torch.is_grad_enabled() and any(tensor.requires_grad for tensor in tensors):
+                        raise NotTraceable("autograd must see the inputs")
+                    return entry[0], tensors, entry[1]
+        return self._prepare_walking(args)
+
+    def _prepare_walking(self, args: tuple) -> Tuple[Callable, List[torch.Tensor], Callable]:
         tensors: List[torch.Tensor] = []
         signature: list = []
         varying = self._varying
@@ -166,7 +189,12 @@ class DirectGraph:
         if entry is None:
             if len(self._graphs) >= MAX_SIGNATURES:
                 raise NotTraceable(f"called with more than {MAX_SIGNATURES} input signatures")
-            entry = self._graphs[key] = self._compile(args, structure, tensors)
+            compiled, output = self._compile(args, structure, tensors)
+            entry = self._graphs[key] = (compiled, builder(output))
+        route = self._route
+        if route is None or route[0](args) is None:  # a new structure: the route follows it
+            route = self._route = (picker(structure, len(tensors), varying), {})
+        route[1][tuple([(t.shape, t.stride(), t.dtype, t.device) for t in tensors])] = entry
         return entry[0], tensors, entry[1]
 
     def _arguments(self, args: tuple, varying_args) -> tuple:
@@ -179,8 +207,8 @@ class DirectGraph:
         return tuple(full)
 
     def __call__(self, *args):
-        compiled, tensors, output = self.prepare(*args)
-        return rebuild(output, iter(compiled(*tensors)))
+        compiled, tensors, build = self.prepare(*args)
+        return build(compiled(*tensors))
 
     def _compile(self, args: tuple, structure, tensors: List[torch.Tensor]) -> Tuple[Callable, object]:
         from torch._inductor import standalone_compile
@@ -214,7 +242,7 @@ class DirectGraph:
             # fixed shapes; standalone_compile gives inductor the shape environment its disk caches need. The
             # graph is handed over, not copied: a copy would hold copies of the constants, no longer read afresh
             compiled = standalone_compile(graph_module, list(tensors), dynamic_shapes="from_example_inputs",
-                                          options={}, donate_graph_module=True)
+                                          options=_OPTIONS, donate_graph_module=True)
         except Exception as error:  # no working compiler, say: torch.compile then meets it and says so
             raise NotTraceable(f"compiling failed: {type(error).__name__}: {error}") from error
         global _compiled_count
