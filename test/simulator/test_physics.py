@@ -413,7 +413,8 @@ def test_softplus_of_overlap_matches_logaddexp_where_contacts_are_active():
 
 @pytest.mark.parametrize("batch", [1, 40])
 def test_pair_scatter_by_gemm_equals_index_add(batch, device, monkeypatch):
-    """Pair forces added through the dense incidence GEMM equal the index_add scatter to rounding."""
+    """Pair forces added through the dense incidence GEMM, or its product summed over the pairs, equal the
+    index_add scatter to rounding."""
     from vmas_ros.simulator.physics import scatter
     from vmas_ros.simulator.tables import PairTable
 
@@ -431,6 +432,14 @@ def test_pair_scatter_by_gemm_equals_index_add(batch, device, monkeypatch):
         force = start.clone()
         scatter.add_pairs_opposite(force, table, on_a)
         results.append(force)
+    # as a compiled step traces it: the product summed over the pairs at one env, the GEMM at 40
+    from vmas_ros.simulator.tracing import traced
+
+    with traced():
+        force = start.clone()
+        scatter.add_pairs_opposite(force, table, on_a)
+    results.append(force)
+    assert (len(pairs) * n * batch <= scatter.SUMMED_SCATTER_MAX_ELEMENTS) == (batch == 1)
     expected = start.clone()
     for p, (i, j) in enumerate(pairs):
         expected[:, i] += on_a[:, p]

@@ -12,7 +12,7 @@ every size-dependent choice the engine makes.
 from __future__ import annotations
 
 __all__ = [
-    "SCATTER_TRANSPOSE_BELOW", "GEMM_SCATTER_MAX_CELLS", "GEMM_SCATTER_MIN_PAIRS", "SMALL_BATCH_ELEMENTS",
+    "SCATTER_TRANSPOSE_BELOW", "GEMM_SCATTER_MAX_CELLS", "SUMMED_SCATTER_MAX_ELEMENTS", "GEMM_SCATTER_MIN_PAIRS", "SMALL_BATCH_ELEMENTS",
     "LIDAR_BATCH_MAX_ELEMENTS", "COMPILED_LIDAR_BATCH_MAX_ELEMENTS", "RIDE_ALONG_MAX_ELEMENTS",
     "SMALL_BATCH_MAX_ENVS", "DIRECT_TRIG_MAX_ELEMENTS", "STACKED_SIDES_MAX_ELEMENTS", "FEW_ENVS",
     "GRID_MIN_SPHERES", "GRID_START_CAPACITY", "GRID_MIN_LIDARS", "DEFAULT_COMPILE_MAX_ENVS",
@@ -70,6 +70,11 @@ SCATTER_TRANSPOSE_BELOW = 16
 #: Pair forces may be scattered with one GEMM against a dense ``[N, P]`` incidence matrix up to
 #: this many (entity, pair) cells; above, the matrix would cost more memory than it saves time.
 GEMM_SCATTER_MAX_CELLS = 1 << 14
+
+#: A compiled step adds pair forces by multiplying with the incidence matrix and summing over the pairs,
+#: instead of a GEMM, up to this many (entity, pair, env) elements: the compiler fuses that into its own
+#: loops, where the GEMM is a library call whose fixed cost is most of a one-env step's scatter.
+SUMMED_SCATTER_MAX_ELEMENTS = 1 << 10
 
 #: Eager steps over many envs scatter by GEMM only from this many pairs of one kernel: with
 #: fewer, ``index_add_`` runs level with it and the BLAS kernel is not worth its resident code.

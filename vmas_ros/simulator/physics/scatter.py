@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 from vmas_ros.simulator.thresholds import (
-    GEMM_SCATTER_MAX_CELLS, GEMM_SCATTER_MIN_PAIRS, SCATTER_TRANSPOSE_BELOW,
+    GEMM_SCATTER_MAX_CELLS, GEMM_SCATTER_MIN_PAIRS, SCATTER_TRANSPOSE_BELOW, SUMMED_SCATTER_MAX_ELEMENTS,
 )
 from vmas_ros.simulator.tracing import tracing
 
@@ -48,8 +48,8 @@ def add_pairs(force: Tensor, table, on_a: Tensor, on_b: Tensor) -> None:
     n_entities, n_pairs = force.shape[1], on_a.shape[1]
     if tracing() and n_entities * n_pairs <= GEMM_SCATTER_MAX_CELLS:
         first, second = table.incidence_ab(n_entities, force.dtype)
-        force.baddbmm_(first.expand(force.shape[0], -1, -1), on_a)
-        force.baddbmm_(second.expand(force.shape[0], -1, -1), on_b)
+        _add_product(force, first, on_a)
+        _add_product(force, second, on_b)
         return
     values = torch.stack([on_a, on_b], dim=2).flatten(1, 2)
     if tracing():  # too many (entity, pair) cells for a dense matrix
@@ -70,8 +70,7 @@ def add_pairs_opposite(force: Tensor, table, on_a: Tensor) -> None:
     """
     n_entities, n_pairs, batch = force.shape[1], on_a.shape[1], force.shape[2]
     if scatter_by_gemm(n_entities, n_pairs, batch):
-        signed = table.incidence_opposite(n_entities, force.dtype)
-        force.baddbmm_(signed.expand(force.shape[0], -1, -1), on_a)
+        _add_product(force, table.incidence_opposite(n_entities, force.dtype), on_a)
     elif tracing():  # too many (entity, pair) cells for a dense matrix
         scatter_rows(force, table.index_a, on_a)
         scatter_rows(force, table.index_b, on_a.neg())
@@ -82,6 +81,16 @@ def add_pairs_opposite(force: Tensor, table, on_a: Tensor) -> None:
     else:
         force.index_add_(1, table.index_a, on_a)
         force.index_add_(1, table.index_b, on_a, alpha=-1)
+
+
+def _add_product(force: Tensor, incidence: Tensor, values: Tensor) -> None:
+    """``force += incidence @ values`` in place: ``force`` ``[C, N, B]``, ``incidence`` ``[N, P]``, ``values``
+    ``[C, P, B]``. A batched GEMM; in a compiled step over few elements, a product summed over the pairs,
+    which the compiler fuses into its own loops (``SUMMED_SCATTER_MAX_ELEMENTS``)."""
+    if tracing() and incidence.numel() * values.shape[-1] <= SUMMED_SCATTER_MAX_ELEMENTS:
+        force.add_((incidence.unsqueeze(-1) * values.unsqueeze(1)).sum(dim=2))  # [C, N, P, B] summed over P
+    else:
+        force.baddbmm_(incidence.expand(force.shape[0], -1, -1), values)
 
 
 @torch.library.custom_op("vmas_ros::scatter_rows", mutates_args=("target",))
