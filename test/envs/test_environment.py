@@ -259,6 +259,23 @@ def test_reset_at_empty_mask_changes_nothing():
     assert torch.equal(env.steps, torch.ones(N_ENVS))
 
 
+def test_steps_count_as_a_plain_tensor_would():
+    """``env.steps`` is brought up to date when read: a tensor read earlier keeps its values, writes into
+    the tensor read and assignments hold, and counting resumes from them."""
+    env = make("simple_spread")
+    env.step(zero_actions(env))
+    earlier = env.steps
+    env.step(zero_actions(env))
+    env.step(zero_actions(env))
+    assert torch.equal(earlier, torch.ones(N_ENVS)) and torch.equal(env.steps, torch.full((N_ENVS,), 3.0))
+    env.steps[0] = 10  # in place, as reset_at does
+    env.step(zero_actions(env))
+    assert env.steps.tolist() == [11.0] + [4.0] * (N_ENVS - 1)
+    env.steps = torch.zeros(N_ENVS)
+    env.step(zero_actions(env))
+    assert torch.equal(env.steps, torch.ones(N_ENVS))
+
+
 class _CountingScenario(BaseScenario):
     """A scenario without batched resets, recording every reset_world_at call."""
 
@@ -356,3 +373,25 @@ def test_discrete_actions_scale_with_u_multiplier():
     env = make("waterfall", num_envs=9, continuous_actions=False)  # waterfall agents: u_multiplier 0.7
     env.step([torch.arange(9).unsqueeze(-1) for _ in env.agents])
     torch.testing.assert_close(env.agents[0].action.u, 0.7 * torch.tensor(EXPECTED_U, dtype=torch.float32))
+
+
+class _OneRewardBuffer(_CountingScenario):
+    """Writes every agent's reward into one buffer and returns it, as some VMAS scenarios do."""
+
+    def make_world(self, batch_dim, device, **kwargs):
+        world = super().make_world(batch_dim, device)
+        world.add_agent(Agent("agent_1", shape=Sphere(0.05)))
+        self.buffer = torch.zeros(batch_dim, device=device)
+        return world
+
+    def reward(self, agent):
+        self.buffer.fill_(float(agent.name[-1]) + 1)
+        return self.buffer
+
+
+def test_each_reward_is_copied_as_the_scenario_returns_it():
+    env = vmas_ros.make_env(_OneRewardBuffer(), num_envs=N_ENVS, seed=0)
+    _, rewards, _, _ = env.step([torch.zeros(N_ENVS, 2)] * 2)
+    assert [r.tolist() for r in rewards] == [[1.0] * N_ENVS, [2.0] * N_ENVS]
+    rewards[0].add_(5)  # the caller's own copies
+    assert rewards[1].tolist() == [2.0] * N_ENVS and env.scenario.buffer.tolist() == [2.0] * N_ENVS

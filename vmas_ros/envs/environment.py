@@ -37,6 +37,11 @@ def _per_component(value) -> list:
     return list(value) if isinstance(value, (list, tuple)) else [value]
 
 
+def _own_info(info):
+    """A copy of a scenario's info the caller may keep and change (an empty dict: a new empty one)."""
+    return {} if type(info) is dict and not info else TorchUtils.recursive_clone(info)
+
+
 class Environment:
     """A batch of ``num_envs`` environments of one scenario, stepped together."""
 
@@ -87,6 +92,24 @@ class Environment:
         self.action_space = self.get_action_space()
         self.observation_space = self.get_observation_space(observations)
 
+    # -------------------------------------------------------------- step counts
+    @property
+    def steps(self) -> Tensor:
+        """``[num_envs]`` float: steps taken since each env's last reset (as VMAS's ``env.steps``).
+
+        A step only counts itself; the tensor is brought up to date when read
+        (one op then, instead of one in every step). Writes into the tensor
+        read, and assignments, hold as with a plain attribute.
+        """
+        if self._steps_pending:
+            self._steps = self._steps + self._steps_pending
+            self._steps_pending = 0
+        return self._steps
+
+    @steps.setter
+    def steps(self, value: Tensor) -> None:
+        self._steps, self._steps_pending = value, 0
+
     # --------------------------------------------------------------- randomness
     def _seed_rng(self, seed: int) -> None:
         with torch.random.fork_rng(devices=self._cuda_devices()):
@@ -105,36 +128,43 @@ class Environment:
         return state
 
     @contextlib.contextmanager
-    def _own_rng(self, host_streams: bool = True):
-        """Run scenario code with this env's RNG streams, then restore the caller's.
+    def _own_rng(self):
+        """Run scenario code with this env's RNG streams (torch, numpy, Python), then restore the caller's.
 
         Swapping numpy's and Python's global states costs more than a whole
         step at small batch sizes, so ``step`` swaps only torch's streams (where
-        scenarios draw noise); construction, resets, random actions and
-        queries swap all three (where scenarios place entities).
+        scenarios draw noise; :meth:`_swap_torch_rng`); construction, resets,
+        random actions and queries swap all three (where scenarios place entities).
         """
-        saved = self._capture_rng()
-        torch.random.set_rng_state(self._rng_state["torch"])
-        if "cuda" in self._rng_state:
-            torch.cuda.set_rng_state(self._rng_state["cuda"], self.device)
-        if host_streams:
-            saved_np, saved_py = np.random.get_state(), random.getstate()
-            np.random.set_state(self._rng_state["numpy"])
-            random.setstate(self._rng_state["python"])
+        callers = self._swap_torch_rng(None)
+        saved_np, saved_py = np.random.get_state(), random.getstate()
+        np.random.set_state(self._rng_state["numpy"])
+        random.setstate(self._rng_state["python"])
         try:
             yield
         finally:
-            mine = self._capture_rng()
-            if host_streams:
-                mine["numpy"], mine["python"] = np.random.get_state(), random.getstate()
-                np.random.set_state(saved_np)
-                random.setstate(saved_py)
-            else:
-                mine["numpy"], mine["python"] = self._rng_state["numpy"], self._rng_state["python"]
-            self._rng_state = mine
-            torch.random.set_rng_state(saved["torch"])
-            if "cuda" in saved:
-                torch.cuda.set_rng_state(saved["cuda"], self.device)
+            host = np.random.get_state(), random.getstate()
+            np.random.set_state(saved_np)
+            random.setstate(saved_py)
+            self._swap_torch_rng(callers)
+            self._rng_state["numpy"], self._rng_state["python"] = host
+
+    def _swap_torch_rng(self, callers: Optional[dict]) -> Optional[dict]:
+        """Swap torch's streams: given None, save the caller's and install this env's (returns the caller's);
+        given the caller's, keep this env's as they are now and restore the caller's."""
+        if callers is None:
+            callers = self._capture_rng()
+            torch.random.set_rng_state(self._rng_state["torch"])
+            if "cuda" in self._rng_state:
+                torch.cuda.set_rng_state(self._rng_state["cuda"], self.device)
+            return callers
+        mine = self._capture_rng()
+        mine["numpy"], mine["python"] = self._rng_state["numpy"], self._rng_state["python"]
+        self._rng_state = mine
+        torch.random.set_rng_state(callers["torch"])
+        if "cuda" in callers:
+            torch.cuda.set_rng_state(callers["cuda"], self.device)
+        return None
 
     def seed(self, seed: Optional[int] = None) -> List[int]:
         """Re-seed this env's own random streams (torch, numpy, random)."""
@@ -185,7 +215,13 @@ class Environment:
         """
         is_stacked = isinstance(actions, Tensor)
         actions = self._ordered_actions(actions)
-        with self._own_rng(host_streams=False), torch.set_grad_enabled(self.grad_enabled):
+        # torch's streams and the grad mode swapped without context managers: at one env, two of them
+        # cost as much as the physics
+        callers_rng = self._swap_torch_rng(None)
+        callers_grad = torch.is_grad_enabled()
+        if callers_grad != self.grad_enabled:
+            torch.set_grad_enabled(self.grad_enabled)
+        try:
             self._set_actions(actions)
             if not stacked_step.stackable(self):
                 for agent in self.world.agents:
@@ -193,10 +229,14 @@ class Environment:
             self.scenario.pre_step()
             self.world.step()
             self.scenario.post_step()
-            self.steps = self.steps + 1
+            self._steps_pending += 1
             if is_stacked:
                 return stacked_step.step_results(self)
             return self._collect(True, True, True, True)
+        finally:
+            if callers_grad != self.grad_enabled:
+                torch.set_grad_enabled(callers_grad)
+            self._swap_torch_rng(callers_rng)
 
     def _ordered_actions(self, actions):
         if isinstance(actions, Tensor):  # every agent's action stacked: checked in _set_actions
@@ -242,6 +282,8 @@ class Environment:
             if not self.grad_enabled and stacked.requires_grad:
                 stacked = stacked.detach()
             tensors = None  # one per agent only when needed: a swarm's thousand views cost more than its check
+        elif self._plain_actions(actions):
+            tensors = actions  # range-checked as one below
         else:
             tensors = []
             for agent, action, plan in zip(self.agents, actions, self._action_plans()):
@@ -256,8 +298,7 @@ class Environment:
         per_agent = lambda: list(stacked.unbind(0)) if tensors is None else tensors  # noqa: E731
         lows, highs = self._stacked_bounds()
         kind = "continuous" if self.continuous_actions else "discrete"
-        same_shape = stacked is not None or all(t.shape == tensors[0].shape for t in tensors)
-        if same_shape:
+        if stacked is not None or all(t.shape == tensors[0].shape for t in tensors):
             # one fused check (and one host read) for all agents; the slow per-agent path only names the culprit
             if stacked is None:
                 stacked = torch.stack(tensors)
@@ -292,6 +333,24 @@ class Environment:
             act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
         for agent, action, plan in zip(self.agents, tensors, self._action_plans()):
             self._apply_action(agent, action, plan)
+
+    def _plain_actions(self, actions: list) -> bool:
+        """Whether ``actions`` are float32 tensors on the env's device, each ``[num_envs, width]`` for one
+        width all agents take, none needing gradients: the common case, which needs none of
+        :func:`~vmas_ros.envs.actions.to_action_tensor`'s conversions (its checks would pass)."""
+        shape = self.__dict__.get("_plain_action_shape", False)
+        if shape is False:
+            widths = {plan[0] for plan in self._action_plans()}
+            shape = self._plain_action_shape = (torch.Size((self.num_envs, widths.pop()))
+                                                if len(widths) == 1 and self.continuous_actions else None)
+        if shape is None:
+            return False
+        device, float32 = self.device, torch.float32
+        for action in actions:
+            if (type(action) is not Tensor or action.dtype is not float32 or action.shape != shape
+                    or action.device != device or action.requires_grad):
+                return False
+        return True
 
     def _stacked_bound_tensors(self):
         """[A, 1, D] low and high of all agents' bounds, and the same as [A, D] (same-shape actions only)."""
@@ -354,18 +413,22 @@ class Environment:
         if not (get_obs or get_rewards or get_infos or get_dones):
             return None
         by_name = self.dict_spaces if dict_agent_names is None else dict_agent_names
-
-        def gather(fn, clone):
-            values = [clone(fn(agent)) for agent in self.agents]
-            return {a.name: v for a, v in zip(self.agents, values)} if by_name else values
-
+        scenario, agents = self.scenario, self.agents
         # rewards first, then observations: scenarios may cache work in reward()
-        rewards = gather(self.scenario.reward, lambda r: r.clone()) if get_rewards else None
-        keep = (lambda o: o) if self.scenario.fresh_observations else TorchUtils.recursive_clone
-        obs = gather(self.scenario.observation, keep) if get_obs else None
-        if get_obs and isinstance(self.scenario, BaseScenario):
-            self.scenario.env_observations_handed_out()
-        infos = gather(self.scenario.info, TorchUtils.recursive_clone) if get_infos else None
+        # each copied as it comes: a scenario may return a buffer it overwrites for the next agent
+        rewards = [scenario.reward(agent).clone() for agent in agents] if get_rewards else None
+        obs = None
+        if get_obs:
+            obs = [scenario.observation(agent) for agent in agents]
+            if not scenario.fresh_observations:
+                obs = [TorchUtils.recursive_clone(o) for o in obs]
+            if isinstance(scenario, BaseScenario):
+                scenario.env_observations_handed_out()
+        infos = [_own_info(scenario.info(agent)) for agent in agents] if get_infos else None
+        if by_name:
+            names = [agent.name for agent in agents]
+            rewards, obs, infos = (None if values is None else dict(zip(names, values))
+                                   for values in (rewards, obs, infos))
         if self.terminated_truncated:
             terminated = truncated = None
             if get_dones:
@@ -381,7 +444,9 @@ class Environment:
             return self._collect(get_observations, get_rewards, get_infos, get_dones, dict_agent_names)
 
     def _done(self):
-        terminated = self.scenario.done().clone()
+        terminated = self.scenario.done()
+        if type(self.scenario).done is not BaseScenario.done:  # the default's is fresh; a scenario's may be kept
+            terminated = terminated.clone()
         truncated = None if self.max_steps is None else self.steps >= self.max_steps
         if self.terminated_truncated:
             return terminated, (torch.zeros_like(terminated) if truncated is None else truncated)

@@ -64,7 +64,7 @@ def set_stacked_forces(env, stacked: Tensor) -> bool:
     block = env.world._actions
     if block.loose:  # some agent holds a force of its own (one that needs gradients)
         return False
-    block.force[:block.count].copy_(stacked)
+    block.stacks()[0].copy_(stacked)
     block.publish_u(stacked)
     return True
 

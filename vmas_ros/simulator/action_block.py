@@ -47,6 +47,7 @@ class ActionBlock:
         self.loose = False
         self._states: List[object] = []  # AgentState per row, to move their views when the tensors grow
         self.force, self.torque = self._allocate(0)
+        self._views: Optional[Tuple[Tensor, Tensor]] = None  # stacks(), made once per count and tensors
         #: every agent's ``action.u`` of this step stacked ``[A, B, size]`` (None: each agent holds its own),
         #: and a counter that changes whenever that does (agents compare it with the one they last saw)
         self.u_rows: Optional[Tensor] = None
@@ -73,11 +74,16 @@ class ActionBlock:
             self._resize(max(4, 2 * self.count), self.device)
         self._states.append(state)
         self.count += 1
+        self._views = None
         return self.count - 1
 
     def stacks(self) -> Tuple[Tensor, Tensor]:
-        """``(force [A, B, dim_p], torque [A, B, 1])``: every agent's action, as views (not copies)."""
-        return self.force[:self.count], self.torque[:self.count]
+        """``(force [A, B, dim_p], torque [A, B, 1])``: every agent's action, as views (not copies; the same
+        two objects from step to step, until an agent joins or the block moves)."""
+        views = self._views
+        if views is None:
+            views = self._views = (self.force[:self.count], self.torque[:self.count])
+        return views
 
     def to(self, device) -> None:
         """Move the block, and the agents' row views with it, to ``device``."""
@@ -87,6 +93,7 @@ class ActionBlock:
         old_force, old_torque = self.stacks()
         self.device = device
         self.force, self.torque = self._allocate(capacity)
+        self._views = None
         self.force[:self.count].copy_(old_force)
         self.torque[:self.count].copy_(old_torque)
         if self.u_rows is not None:

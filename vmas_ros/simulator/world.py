@@ -290,17 +290,14 @@ class World:
         return [a for a in self._agents if a.action_script is not None]
 
     def _step_params(self) -> physics.StepParams:
-        return physics.StepParams(
-            dt=self._dt,
-            substeps=self._substeps,
-            collision_force=self._collision_force,
-            joint_force=self._joint_force,
-            torque_constraint_force=self._torque_constraint_force,
-            contact_margin=self._contact_margin,
-            x_semidim=self._x_semidim,
-            y_semidim=self._y_semidim,
-            broad_phase=self._broad_phase,
-        )
+        """The step's world-level constants: the same object while they stay the same (a compiled step's
+        layout is keyed on them, and this runs every step)."""
+        values = (self._dt, self._substeps, self._collision_force, self._joint_force, self._torque_constraint_force,
+                  self._contact_margin, self._x_semidim, self._y_semidim, self._broad_phase)
+        cached = self.__dict__.get("_params_cache")
+        if cached is None or cached[0] != values:
+            cached = self._params_cache = (values, physics.StepParams(*values))
+        return cached[1]
 
     # ---------------------------------------------------------------------- step
     def step(self) -> None:

@@ -196,6 +196,13 @@ class WorldState:
             return False
         return True
 
+    def still_adopted(self, q: Tensor, v: Tensor) -> bool:
+        """Whether ``(q, v)`` is still the clean adopted state (what :meth:`planar_state` would return): the
+        check of a cache keyed on that state, in one call (it runs several times per step)."""
+        views = self._views
+        return (not self.dirty and views is not None and views.q is q and views.v is v
+                and not views.written())
+
     def view(self, name: str, slot: int) -> Tensor:
         """Entity ``slot``'s ``[B, D]`` view of field ``name`` of the adopted state (``EntityState`` reads it)."""
         return (self._views or self._adopted()).part(name, slot)

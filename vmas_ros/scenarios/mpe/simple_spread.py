@@ -71,8 +71,8 @@ class Scenario(BaseScenario):
     def batched_outputs(self, q: torch.Tensor, v: torch.Tensor) -> tuple:
         """The shared reward ``[B]``, then what the observations are read from.
 
-        A few envs: every agent's observation ``[A, B, obs]`` (one pass for
-        all, see :func:`_few_envs_outputs`). Many envs: every entity's position
+        A few envs: every agent's observation ``[B, obs]``, a tuple (one pass
+        for all, see :func:`_few_envs_outputs`). Many envs: every entity's position
         ``[N, B, 2]`` and every agent's velocity ``[A, B, 2]``, from which each
         agent's observation is assembled on its own (:meth:`_agent_observation`).
         """
@@ -167,7 +167,7 @@ def _many_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overl
 
 def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below: torch.Tensor,
                       seen: torch.Tensor) -> tuple:
-    """Rewards ``[B]`` and observations ``[A, B, obs]`` from the planar state ``[3, N, B]`` (landmarks first).
+    """Rewards ``[B]`` and each agent's observation ``[B, obs]`` (a tuple) from the planar state ``[3, N, B]`` (landmarks first).
 
     ``overlap_below`` ``[A, A, 1]``: distance under which two agents overlap
     (negative for pairs that cannot); ``seen``: each agent's observed rows of
@@ -184,7 +184,7 @@ def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overla
     rows = torch.index_select(relative.flatten(0, 1), 0, seen).view(agents.shape[0], -1, *relative.shape[2:])
     own_vel = v[:2, n_landmarks:].permute(1, 2, 0)
     observations = torch.cat([agents, own_vel, rows.permute(0, 2, 1, 3).flatten(2)], dim=-1)
-    return rewards, observations
+    return rewards, observations.unbind(0)
 
 
 def _subtract_into(destination: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> None:
