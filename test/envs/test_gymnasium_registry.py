@@ -54,14 +54,7 @@ def test_every_scenario_has_an_id():
     assert register_envs() == ids, "registering again changes nothing"
 
 
-#: road_traffic keeps its agents' last two steering commands across resets (as VMAS's does, for reward parity), so
-#: the first step after a seeded reset depends on the episode before: gymnasium's determinism check fails
-_STEERING_HISTORY = pytest.mark.xfail(strict=True, raises=AssertionError,
-                                      reason="road_traffic's steering history survives a reset, as in VMAS")
-
-
-@pytest.mark.parametrize("scenario", [pytest.param(name, marks=_STEERING_HISTORY) if name == "road_traffic" else name
-                                      for name in SCENARIOS])
+@pytest.mark.parametrize("scenario", SCENARIOS)
 def test_every_id_makes_a_native_env_that_passes_gymnasiums_checker(scenario):
     render_mode = "rgb_array" if scenario in RENDERED else None
     env = gymnasium.make(env_id(scenario), max_steps=20, seed=0, render_mode=render_mode)

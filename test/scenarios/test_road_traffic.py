@@ -165,6 +165,25 @@ def test_reset_at_resets_exactly_those_envs(index):
     torch.testing.assert_close(s.prev_pos[chosen], pos)
 
 
+@pytest.mark.parametrize("clear", [False, True])
+def test_steering_history_survives_a_reset_as_in_vmas_unless_cleared(clear):
+    """VMAS keeps the last two steering commands across a reset, so the first reward after a seeded reset
+    depends on the episode before; ``reset_steering_history=True`` (what gymnasium's ids pass) clears
+    them for the envs reset, and a seeded reset then repeats its episode."""
+    env = make(2, n_agents=4, is_add_noise=False, reset_steering_history=clear)
+    straight, hard_left = torch.tensor([0.5, 0.0]), torch.tensor([0.5, 0.6])
+
+    def first_rewards(before):
+        env.step([before.expand(2, 2)] * 4)
+        env.reset(seed=5)
+        _, rewards, _, _ = env.step([straight.expand(2, 2)] * 4)
+        return torch.stack(rewards)
+
+    after_straight, after_left = first_rewards(straight), first_rewards(hard_left)
+    assert torch.equal(after_straight, after_left) == clear
+    assert not env.scenario._history_cleared.any(), "the reset's observation took it into account"
+
+
 # --------------------------------------------------------------------- heuristic
 def test_heuristic_action_shape_and_range():
     policy = road_traffic.HeuristicPolicy(n_agents=4)

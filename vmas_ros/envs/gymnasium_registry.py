@@ -17,6 +17,11 @@ Keyword arguments go to ``make_env`` (``max_steps``, ``seed``, ``device``,
 ``continuous_actions``, the scenario's own), or to the wrapper
 (``sum_rewards``, ``return_numpy``, ``render_mode``, and ``autoreset_mode``
 for the vector env). ``max_episode_steps`` of ``make_vec`` is ``max_steps``.
+
+Where a scenario follows VMAS in a way gymnasium's conventions rule out, its
+id takes gymnasium's side unless told otherwise (:data:`GYMNASIUM_SIDE`):
+road_traffic's steering history is cleared on reset, so that a seeded reset
+repeats its episode, as gymnasium's checker requires.
 """
 from __future__ import annotations
 
@@ -26,7 +31,7 @@ from vmas_ros.compat.gymnasium_ids import NAMESPACE, VERSION, env_id, register_e
 from vmas_ros.envs.gymnasium_env import GymnasiumWrapper
 from vmas_ros.envs.gymnasium_vec import GymnasiumVectorizedWrapper
 
-__all__ = ["NAMESPACE", "VERSION", "GymnasiumNativeEnv", "GymnasiumNativeVectorEnv", "env_id", "make_single",
+__all__ = ["GYMNASIUM_SIDE", "NAMESPACE", "VERSION", "GymnasiumNativeEnv", "GymnasiumNativeVectorEnv", "env_id", "make_single",
            "make_vector", "register_envs"]
 
 
@@ -58,12 +63,21 @@ class GymnasiumNativeVectorEnv(GymnasiumVectorizedWrapper):
         return _as_tuple(super()._per_agent(values))
 
 
+#: scenario -> kwargs its id passes to ``make_env`` unless the caller gives them: gymnasium's side where VMAS's
+#: behaviour breaks one of gymnasium's conventions (``make_env`` itself keeps VMAS's)
+GYMNASIUM_SIDE = {"road_traffic": {"reset_steering_history": True}}
+
+
+def _gymnasium_side(scenario: Any, kwargs: dict) -> dict:
+    return {**GYMNASIUM_SIDE.get(scenario, {}), **kwargs} if isinstance(scenario, str) else kwargs
+
+
 def make_single(scenario: str, render_mode: Optional[str] = None, sum_rewards: bool = True,
                 return_numpy: bool = True, **kwargs: Any) -> GymnasiumNativeEnv:
     """The entry point of ``vmas_ros/<scenario>-v0``: one env."""
     from vmas_ros.envs.make_env import make_env
 
-    env = make_env(scenario, num_envs=1, terminated_truncated=True, **kwargs)
+    env = make_env(scenario, num_envs=1, terminated_truncated=True, **_gymnasium_side(scenario, kwargs))
     return GymnasiumNativeEnv(env, return_numpy=return_numpy, render_mode=render_mode, sum_rewards=sum_rewards)
 
 
@@ -78,6 +92,6 @@ def make_vector(scenario: str, num_envs: int = 1, render_mode: Optional[str] = N
             raise ValueError(f"max_episode_steps={max_episode_steps} and max_steps={kwargs['max_steps']} differ; "
                              f"give one of them")
         kwargs["max_steps"] = max_episode_steps
-    env = make_env(scenario, num_envs=num_envs, terminated_truncated=True, **kwargs)
+    env = make_env(scenario, num_envs=num_envs, terminated_truncated=True, **_gymnasium_side(scenario, kwargs))
     return GymnasiumNativeVectorEnv(env, return_numpy=return_numpy, render_mode=render_mode, sum_rewards=sum_rewards,
                                     autoreset_mode=autoreset_mode)

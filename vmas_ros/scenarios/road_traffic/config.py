@@ -34,6 +34,10 @@ DEFAULTS = {
     "is_observe_distance_to_agents": True, "is_observe_distance_to_boundaries": True,
     "is_observe_distance_to_center_line": True, "is_add_noise": True,
     "is_observe_ref_path_other_agents": False,
+    # not VMAS's: True clears an env's steering history when it resets, so that a seeded reset repeats its
+    # episode (gymnasium's convention); VMAS keeps it (False), and so the first reward after a reset
+    # depends on the episode before
+    "reset_steering_history": False,
     # only used by VMAS's map type "2" (refused here) and by rendering
     "n_steps_stored": 10, "n_steps_before_recording": 10, "probability_use_recording": 0.2,
     "resolution_factor": 200, "render_origin": None, "viewer_size": None, "viewer_zoom": 1.44,
@@ -45,7 +49,7 @@ FLAGS = (
     "is_partial_observation", "is_ego_view", "is_apply_mask", "is_observe_vertices",
     "is_observe_distance_to_agents", "is_observe_distance_to_boundaries",
     "is_observe_distance_to_center_line", "is_add_noise", "is_observe_ref_path_other_agents",
-    "is_visualize_short_term_path", "is_real_time_rendering", "is_visualize_extra_info",
+    "reset_steering_history", "is_visualize_short_term_path", "is_real_time_rendering", "is_visualize_extra_info",
 )
 
 

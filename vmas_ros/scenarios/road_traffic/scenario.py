@@ -86,6 +86,8 @@ class Scenario(BaseScenario):
         # the steering commands of the last two observations (``_observed`` of them so far, in all envs)
         self.steer_last, self.steer_before = zeros(), zeros()
         self._observed = 0
+        #: [B] envs reset since the last observation (with reset_steering_history): they record no steering
+        self._history_cleared = torch.zeros(batch, dtype=torch.bool, device=device)
         self._rewards = zeros()
         self._obs = None
 
@@ -152,6 +154,10 @@ class Scenario(BaseScenario):
         for name in ("hit_agents", "hit_boundary", "hit_entry", "hit_exit"):
             getattr(self, name)[rows] = False
         self.prev_pos[rows] = self._stack("pos")[rows]
+        if self.reset_steering_history:  # the episode starts without the last one's steering
+            self.steer_last[rows] = 0
+            self.steer_before[rows] = 0
+            self._history_cleared[rows] = True
 
     # --------------------------------------------------------------- tracking
     def _stack(self, field: str) -> Tensor:
@@ -269,6 +275,9 @@ class Scenario(BaseScenario):
             steer = torch.zeros_like(self.steer_last)
         else:
             steer = torch.stack([a.action.u[:, 1] for a in agents], dim=1) / self.max_steering_angle
+        if self.reset_steering_history:  # an env reset since: its agents' actions are the last episode's
+            steer = steer.masked_fill(self._history_cleared.unsqueeze(1), 0.0)
+            self._history_cleared.zero_()
         self.steer_before, self.steer_last = self.steer_last, steer
         self._observed += 1
 
