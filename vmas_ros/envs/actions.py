@@ -40,6 +40,18 @@ def to_action_tensor(action, agent_name: str, num_envs: int, size: int, device: 
     return action if action.device == device else action.to(device)
 
 
+def plain_actions(actions: list, shape: torch.Size, device: torch.device) -> bool:
+    """Whether every one of ``actions`` is a float32 tensor of ``shape`` on ``device`` that needs no
+    gradients: the common case, which needs none of :func:`to_action_tensor`'s conversions (its checks
+    would pass). Straight-line attribute reads: this runs on every step."""
+    float32 = torch.float32
+    for action in actions:
+        if (type(action) is not Tensor or action.dtype is not float32 or action.shape != shape
+                or action.device != device or action.requires_grad):
+            return False
+    return True
+
+
 def to_stacked_actions(actions: Tensor, n_agents: int, num_envs: int, sizes: List[int], device: torch.device,
                        continuous: bool) -> Tensor:
     """Validate the stacked form of every agent's action, ``[n_agents, num_envs, size]``, and return it.

@@ -8,8 +8,6 @@ other code using torch's global RNG does not disturb them.
 """
 from __future__ import annotations
 
-import contextlib
-import random
 from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
@@ -22,6 +20,7 @@ from vmas_ros.envs import actions as act
 from vmas_ros.envs import stacked as stacked_step
 from vmas_ros.envs.limits import check_world_size
 from vmas_ros.envs.memory import check_memory
+from vmas_ros.envs.random_streams import OwnRandomStreams
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
 
@@ -42,7 +41,7 @@ def _own_info(info):
     return {} if type(info) is dict and not info else TorchUtils.recursive_clone(info)
 
 
-class Environment:
+class Environment(OwnRandomStreams):
     """A batch of ``num_envs`` environments of one scenario, stepped together."""
 
     #: VMAS's render modes and vectorised flag (``rgb_array`` frames are drawn headless, ``human`` too)
@@ -109,68 +108,6 @@ class Environment:
     @steps.setter
     def steps(self, value: Tensor) -> None:
         self._steps, self._steps_pending = value, 0
-
-    # --------------------------------------------------------------- randomness
-    def _seed_rng(self, seed: int) -> None:
-        with torch.random.fork_rng(devices=self._cuda_devices()):
-            torch.manual_seed(seed)
-            self._rng_state = self._capture_rng()
-        self._rng_state["numpy"] = np.random.RandomState(seed).get_state()
-        self._rng_state["python"] = random.Random(seed).getstate()
-
-    def _cuda_devices(self) -> list:
-        return [self.device] if self.device.type == "cuda" else []
-
-    def _capture_rng(self) -> dict:
-        state = {"torch": torch.random.get_rng_state()}
-        if self.device.type == "cuda":
-            state["cuda"] = torch.cuda.get_rng_state(self.device)
-        return state
-
-    @contextlib.contextmanager
-    def _own_rng(self):
-        """Run scenario code with this env's RNG streams (torch, numpy, Python), then restore the caller's.
-
-        Swapping numpy's and Python's global states costs more than a whole
-        step at small batch sizes, so ``step`` swaps only torch's streams (where
-        scenarios draw noise; :meth:`_swap_torch_rng`); construction, resets,
-        random actions and queries swap all three (where scenarios place entities).
-        """
-        callers = self._swap_torch_rng(None)
-        saved_np, saved_py = np.random.get_state(), random.getstate()
-        np.random.set_state(self._rng_state["numpy"])
-        random.setstate(self._rng_state["python"])
-        try:
-            yield
-        finally:
-            host = np.random.get_state(), random.getstate()
-            np.random.set_state(saved_np)
-            random.setstate(saved_py)
-            self._swap_torch_rng(callers)
-            self._rng_state["numpy"], self._rng_state["python"] = host
-
-    def _swap_torch_rng(self, callers: Optional[dict]) -> Optional[dict]:
-        """Swap torch's streams: given None, save the caller's and install this env's (returns the caller's);
-        given the caller's, keep this env's as they are now and restore the caller's."""
-        if callers is None:
-            callers = self._capture_rng()
-            torch.random.set_rng_state(self._rng_state["torch"])
-            if "cuda" in self._rng_state:
-                torch.cuda.set_rng_state(self._rng_state["cuda"], self.device)
-            return callers
-        mine = self._capture_rng()
-        mine["numpy"], mine["python"] = self._rng_state["numpy"], self._rng_state["python"]
-        self._rng_state = mine
-        torch.random.set_rng_state(callers["torch"])
-        if "cuda" in callers:
-            torch.cuda.set_rng_state(callers["cuda"], self.device)
-        return None
-
-    def seed(self, seed: Optional[int] = None) -> List[int]:
-        """Re-seed this env's own random streams (torch, numpy, random)."""
-        seed = 0 if seed is None else int(seed)
-        self._seed_rng(seed)
-        return [seed]
 
     # -------------------------------------------------------------------- reset
     def reset(self, seed: Optional[int] = None, return_observations: bool = True, return_info: bool = False, return_dones: bool = False):
@@ -335,22 +272,14 @@ class Environment:
             self._apply_action(agent, action, plan)
 
     def _plain_actions(self, actions: list) -> bool:
-        """Whether ``actions`` are float32 tensors on the env's device, each ``[num_envs, width]`` for one
-        width all agents take, none needing gradients: the common case, which needs none of
-        :func:`~vmas_ros.envs.actions.to_action_tensor`'s conversions (its checks would pass)."""
+        """Whether ``actions`` need none of :func:`~vmas_ros.envs.actions.to_action_tensor`'s conversions
+        (:func:`~vmas_ros.envs.actions.plain_actions`; the shape all of them must have is worked out once)."""
         shape = self.__dict__.get("_plain_action_shape", False)
         if shape is False:
             widths = {plan[0] for plan in self._action_plans()}
             shape = self._plain_action_shape = (torch.Size((self.num_envs, widths.pop()))
                                                 if len(widths) == 1 and self.continuous_actions else None)
-        if shape is None:
-            return False
-        device, float32 = self.device, torch.float32
-        for action in actions:
-            if (type(action) is not Tensor or action.dtype is not float32 or action.shape != shape
-                    or action.device != device or action.requires_grad):
-                return False
-        return True
+        return shape is not None and act.plain_actions(actions, shape, self.device)
 
     def _stacked_bound_tensors(self):
         """[A, 1, D] low and high of all agents' bounds, and the same as [A, D] (same-shape actions only)."""
