@@ -162,7 +162,7 @@ class DirectGraph:
         signature; the caller runs ``build(compiled(*tensors))``, so that no frame of this module stands
         between it and the compiled code.
 
-        The arguments' structure is taken apart by code written for it
+        The arguments' structure is taken apart by closures made for it
         (:mod:`~vmas_ros.simulator.structure_code`) while it stays the same;
         a new structure goes through the generic walk, and becomes the route.
         """
