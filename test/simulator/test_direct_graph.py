@@ -65,6 +65,24 @@ def test_inputs_that_autograd_must_see_are_declined():
     x = torch.ones(3, requires_grad=True)
     with pytest.raises(NotTraceable, match="autograd"):
         DirectGraph(lambda t: t * 2)(x)
+    direct = DirectGraph(lambda t: t * 2)
+    with torch.no_grad():  # nothing for autograd to see: compiled, and the route remembers the signature
+        torch.testing.assert_close(direct(x), torch.full((3,), 2.0))
+        torch.testing.assert_close(direct(x), torch.full((3,), 2.0))
+    with pytest.raises(NotTraceable, match="autograd"):  # the same signature, with grad mode on
+        direct(x)
+
+
+def test_other_strides_get_code_of_their_own(device):
+    """The route checks every tensor's strides, not only its shape: a transposed input of the same shape
+    is another signature."""
+    direct = DirectGraph(lambda m: m + torch.arange(3, device=m.device))
+    square = torch.rand(3, 3, device=device)
+    before = graphs_compiled()
+    torch.testing.assert_close(direct(square), square + torch.arange(3, device=device))
+    torch.testing.assert_close(direct(square.t()), square.t() + torch.arange(3, device=device))
+    torch.testing.assert_close(direct(square), square + torch.arange(3, device=device))
+    assert graphs_compiled() == before + 2
 
 
 def _add(x, pair):

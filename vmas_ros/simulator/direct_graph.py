@@ -30,6 +30,11 @@ from typing import Callable, Dict, Hashable, List, Optional, Sequence, Tuple
 
 import torch
 
+try:
+    from torch._C._dynamo.guards import TensorGuards as _TensorGuards
+except ImportError:  # a torch without dynamo's C++ guards
+    _TensorGuards = None
+
 from vmas_ros.simulator.background_compile import copy_inputs
 from vmas_ros.simulator.structure_code import TENSOR as _TENSOR
 from vmas_ros.simulator.structure_code import builder, picker
@@ -57,6 +62,24 @@ _OPTIONS = {"config_patches": {"size_asserts": False}}
 #: compiled signatures per function before it declines: more means its inputs' shapes keep changing
 MAX_SIGNATURES = 8
 _PRIMITIVE = (int, float, bool, str, type(None))
+
+
+def _same_metadata(tensors: List[torch.Tensor]) -> Callable[..., bool]:
+    """A check that tensors have the shapes, strides, dtypes, devices and ``requires_grad`` of ``tensors``.
+
+    Dynamo's own tensor check, in C++, where torch has it (comparing a tuple of
+    each tensor's metadata costs several times more); else that tuple.
+    """
+    if _TensorGuards is not None:
+        guards = _TensorGuards(*tensors, dynamic_dims_sizes=[list(t.shape) for t in tensors],
+                               dynamic_dims_strides=[list(t.stride()) for t in tensors])
+        return guards.check
+    expected = _metadata(tensors)
+    return lambda *given: _metadata(given) == expected
+
+
+def _metadata(tensors) -> tuple:
+    return tuple([(t.shape, t.stride(), t.dtype, t.device, t.requires_grad) for t in tensors])
 
 
 def _flatten(value, tensors: List[torch.Tensor], signature: list) -> object:
@@ -154,8 +177,9 @@ class DirectGraph:
         self._varying = None if varying is None else tuple(varying)
         #: signature -> (compiled code, output builder)
         self._graphs: Dict[Hashable, Tuple[Callable, Callable]] = {}
-        #: the last structure of arguments seen: (its picker, its tensors' metadata -> graph entry)
-        self._route: Optional[Tuple[Callable, Dict[Hashable, Tuple[Callable, Callable]]]] = None
+        #: the last structure of arguments seen: its picker, and per signature met with it (a check of the
+        #: tensors' metadata, whether the check's tensors need gradients, the graph entry)
+        self._route: Optional[Tuple[Callable, List[Tuple[Callable, bool, Tuple[Callable, Callable]]]]] = None
 
     def prepare(self, *args) -> Tuple[Callable, List[torch.Tensor], Callable]:
         """``(compiled code, its tensor inputs, output builder)`` for a call with ``args``, compiling on a new
@@ -170,11 +194,11 @@ class DirectGraph:
         if route is not None:
             tensors = route[0](args)
             if tensors is not None:
-                entry = route[1].get(tuple([(t.shape, t.stride(), t.dtype, t.device) for t in tensors]))
-                if entry is not None:
-                    if torch.is_grad_enabled() and any(tensor.requires_grad for tensor in tensors):
-                        raise NotTraceable("autograd must see the inputs")
-                    return entry[0], tensors, entry[1]
+                for same_metadata, needs_grad, entry in route[1]:
+                    if same_metadata(*tensors):
+                        if needs_grad and torch.is_grad_enabled():
+                            raise NotTraceable("autograd must see the inputs")
+                        return entry[0], tensors, entry[1]
         return self._prepare_walking(args)
 
     def _prepare_walking(self, args: tuple) -> Tuple[Callable, List[torch.Tensor], Callable]:
@@ -193,8 +217,8 @@ class DirectGraph:
             entry = self._graphs[key] = (compiled, builder(output))
         route = self._route
         if route is None or route[0](args) is None:  # a new structure: the route follows it
-            route = self._route = (picker(structure, len(tensors), varying), {})
-        route[1][tuple([(t.shape, t.stride(), t.dtype, t.device) for t in tensors])] = entry
+            route = self._route = (picker(structure, len(tensors), varying), [])
+        route[1].append((_same_metadata(tensors), any(t.requires_grad for t in tensors), entry))
         return entry[0], tensors, entry[1]
 
     def _arguments(self, args: tuple, varying_args) -> tuple:
