@@ -22,6 +22,7 @@ from vmas_ros.simulator.shapes import Box, Line, Sphere
 
 if TYPE_CHECKING:
     from vmas_ros.simulator.physics.constants import StepConstants
+    from vmas_ros.simulator.physics.scales import DynamicsScales
 
 #: collision kernels, keyed by the (first, second) shape kinds they take
 PAIR_KINDS: Tuple[Tuple[str, str], ...] = (
@@ -180,6 +181,8 @@ class WorldTables:
     limits_velocity: bool = True  # some finite v_range
     limits_force: bool = True  # some agent with finite max_f or f_range
     limits_torque: bool = True  # some agent with finite max_t or t_range
+    #: per-env mass and drag scales (physics.scales); None: as built, the same in every env
+    scales: Optional["DynamicsScales"] = field(default=None, repr=False, compare=False)
     #: the physics' constants for these tables (physics.constants.step_constants fills it once)
     step_constants: Optional["StepConstants"] = field(default=None, repr=False, compare=False)
     #: whether some agent cannot move or turn (World._action_input fills it once)
@@ -370,4 +373,5 @@ def build_tables(world) -> WorldTables:
         limits_velocity=any(e.v_range is not None for e in entities),
         limits_force=any(a.max_f is not None or a.f_range is not None for a in agents),
         limits_torque=any(a.max_t is not None or a.t_range is not None for a in agents),
+        scales=world._dynamics_scales,
     )

@@ -97,6 +97,7 @@ class World:
         self._names: set = set()  # every entity's name: adding one checks it in O(1)
         self._joint_constraints: Dict[frozenset, object] = {}
         self._tables: Optional[WorldTables] = None
+        self._dynamics_scales: Optional[physics.DynamicsScales] = None  # per-env mass and drag (scale_dynamics)
         #: every entity's pos/vel/rot/ang_vel, and everything derived from them (see world_state.py)
         self._state = WorldState(batch_dim, self._device)
         #: every agent's action force and torque, one row each (see action_block.py)
@@ -227,6 +228,11 @@ class World:
             self.entity_index_map = {e: i for i, e in enumerate(self.entities)}
         return self._tables
 
+    def scale_dynamics(self, mass: Optional[Tensor] = None, drag: Optional[Tensor] = None) -> None:
+        """Scale every entity's mass (with its moment of inertia) and drag per env: ``[N, B]`` each, in
+        ``entities`` order (None: 1), until set again (:func:`~vmas_ros.simulator.physics.scales.apply`)."""
+        physics.scales.apply(self, mass, drag)
+
     def reset(self, env_index) -> None:
         """Zero every entity's state (and agents' actions) in env ``env_index``, or in all envs when None."""
         entities = self.entities
@@ -249,6 +255,7 @@ class World:
         self._gravity = self._gravity.to(self._device)
         self._state.to(self._device)  # every entity owns its fields again, to move them
         self._actions.to(self._device)  # the agents' action rows move with it
+        self._dynamics_scales = physics.scales.moved(self._dynamics_scales, self._device)
         for e in self.entities:
             e.to(self._device)
         self._invalidate_tables()
@@ -313,8 +320,7 @@ class World:
             fixed_rotation = self._joint_fixed_rotations(tables)
         params = self._step_params()
         physics.step_constants(tables, params)  # built eagerly once, also when the step is compiled
-        # state kernels ride along in compiled steps only: eagerly, computing them when they are asked for
-        # costs the same calls and keeps the step's own peak memory lower
+        # state kernels ride along in compiled steps only: eagerly, computing them when asked keeps peak memory lower
         kernels = self._state.kernels if self.physics_compiled else ()
         new, outputs = self._advance(state, tables, params, actions, fixed_rotation, kernels)
         # a grid that met more candidates than it had room for: grow it and compute the step again

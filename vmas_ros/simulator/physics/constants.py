@@ -18,6 +18,7 @@ from torch import Tensor
 from vmas_ros.simulator.layout import split_xy_stacked
 from vmas_ros.simulator.masks import zero_like
 from vmas_ros.simulator.thresholds import GEMM_SCATTER_MAX_CELLS
+from vmas_ros.simulator.physics.scales import dynamics_columns
 from vmas_ros.simulator.physics.types import StepParams
 from vmas_ros.simulator.tables import WorldTables
 
@@ -30,7 +31,7 @@ class StepConstants:
 
     key: Tuple  # (sub_dt, x_semidim, y_semidim): the step parameters these were built for
     sub_dt: float  # dt / substeps
-    keep: Tensor  # [N, 1] 1 - drag, applied on the first substep
+    keep: Tensor  # [N, 1] 1 - drag, applied on the first substep ([N, B] with per-env scales, as the next three)
     mass: Tensor  # [3, N, 1] mass, mass, moment of inertia
     friction_cap: Tensor  # [3, N, 1] linear friction * mass (x, y), angular friction * inertia
     mass_over_dt: Tensor  # [3, N, 1] the force that stops each coordinate within one substep
@@ -62,7 +63,8 @@ def step_constants(tables: WorldTables, params: StepParams) -> StepConstants:
         return cached
     col = lambda t: t[..., 0]  # noqa: E731  [N, 1, 1] -> [N, 1]
     per_coord = lambda lin, ang: torch.stack([lin, lin, ang])  # noqa: E731
-    mass, inertia = col(tables.mass), col(tables.inertia)
+    keep, coord_mass, friction_cap = dynamics_columns(tables)
+    mass = col(tables.mass)
     free = per_coord(col(tables.movable), col(tables.rotatable))
     max_speed, v_range = col(tables.max_speed), col(tables.v_range)
     inf = float("inf")
@@ -70,10 +72,7 @@ def step_constants(tables: WorldTables, params: StepParams) -> StepConstants:
     span = _free_span(free)
     constants = StepConstants(
         key=key, sub_dt=sub_dt,
-        keep=col(1 - tables.drag),
-        mass=per_coord(mass, inertia),
-        friction_cap=per_coord(col(tables.linear_friction) * mass, col(tables.angular_friction) * inertia),
-        mass_over_dt=per_coord(mass, inertia) / sub_dt,
+        keep=keep, mass=coord_mass, friction_cap=friction_cap, mass_over_dt=coord_mass / sub_dt,
         gravity=torch.cat([split_xy_stacked(tables.gravity_force.contiguous()),
                            torch.zeros_like(tables.gravity_force[..., 0]).unsqueeze(0)]),
         max_speed=max_speed, finite_max_speed=torch.where(torch.isfinite(max_speed), max_speed, 0.0),
