@@ -395,3 +395,16 @@ def test_each_reward_is_copied_as_the_scenario_returns_it():
     assert [r.tolist() for r in rewards] == [[1.0] * N_ENVS, [2.0] * N_ENVS]
     rewards[0].add_(5)  # the caller's own copies
     assert rewards[1].tolist() == [2.0] * N_ENVS and env.scenario.buffer.tolist() == [2.0] * N_ENVS
+    _, stacked_rewards, _, _ = env.step(torch.zeros(2, N_ENVS, 2))  # the stacked step copies as they come too
+    assert stacked_rewards.tolist() == [[1.0] * N_ENVS, [2.0] * N_ENVS]
+
+
+def test_fresh_rewards_go_out_uncopied_yet_each_agent_and_call_has_its_own():
+    env = vmas_ros.make_env("simple_spread", num_envs=2, seed=0)
+    assert env.scenario.fresh_rewards, "simple_spread at a few envs gives each agent a row of its own"
+    _, rewards, _, _ = env.step([torch.zeros(2, 2)] * env.n_agents)
+    again = env.get_from_scenario(get_observations=False, get_rewards=True, get_infos=False, get_dones=False)[0]
+    assert len({r.data_ptr() for r in rewards + again}) == 2 * env.n_agents, "no two share memory"
+    expected = rewards[1].clone()
+    rewards[0].add_(5)
+    assert torch.equal(rewards[1], expected) and torch.equal(again[0], expected)

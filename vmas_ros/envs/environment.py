@@ -36,11 +36,6 @@ def _per_component(value) -> list:
     return list(value) if isinstance(value, (list, tuple)) else [value]
 
 
-def _own_info(info):
-    """A copy of a scenario's info the caller may keep and change (an empty dict: a new empty one)."""
-    return {} if type(info) is dict and not info else TorchUtils.recursive_clone(info)
-
-
 class Environment(OwnRandomStreams):
     """A batch of ``num_envs`` environments of one scenario, stepped together."""
 
@@ -212,6 +207,7 @@ class Environment(OwnRandomStreams):
     def _set_actions(self, actions) -> None:
         """``actions``: a list with one per agent, or every agent's stacked ``[n_agents, num_envs, size]``."""
         stacked = None
+        same_shapes = True
         if isinstance(actions, Tensor):
             stacked = act.to_stacked_actions(actions, self.n_agents, self.num_envs,
                                              [plan[0] for plan in self._action_plans()], self.device,
@@ -220,7 +216,7 @@ class Environment(OwnRandomStreams):
                 stacked = stacked.detach()
             tensors = None  # one per agent only when needed: a swarm's thousand views cost more than its check
         elif self._plain_actions(actions):
-            tensors = actions  # range-checked as one below
+            tensors = actions  # of one shape, range-checked as one below
         else:
             tensors = []
             for agent, action, plan in zip(self.agents, actions, self._action_plans()):
@@ -229,13 +225,11 @@ class Environment(OwnRandomStreams):
                 if not self.grad_enabled and action.requires_grad:
                     action = action.detach()
                 tensors.append(action)
+            same_shapes = all(t.shape == tensors[0].shape for t in tensors)
         self.world._actions.publish_u(None)  # each agent's own u from here, unless all go in as one block
         if stacked is None and not tensors:  # every agent is scripted
             return
-        per_agent = lambda: list(stacked.unbind(0)) if tensors is None else tensors  # noqa: E731
-        lows, highs = self._stacked_bounds()
-        kind = "continuous" if self.continuous_actions else "discrete"
-        if stacked is not None or all(t.shape == tensors[0].shape for t in tensors):
+        if same_shapes:
             # one fused check (and one host read) for all agents; the slow per-agent path only names the culprit
             if stacked is None:
                 stacked = torch.stack(tensors)
@@ -245,31 +239,41 @@ class Environment(OwnRandomStreams):
             if self.clamp_action and self.continuous_actions:
                 # NaN and inf are refused even when clamping: clamping would hide them as +-u_range
                 if not bool(torch.isfinite(stacked).all()):
-                    unbounded = [torch.full_like(low, float("inf")) for low in lows]
-                    act.check_finite_and_range(per_agent(), [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
+                    self._name_bad_action(stacked, tensors, unbounded=True)
                 stacked = torch.clamp(stacked, low, high)
                 tensors = None
             elif stacked.numel() <= FEW_ACTION_ELEMENTS:
                 # few: two calls (clamping changes something, or meets a NaN, exactly when an action is out)
                 if not torch.equal(torch.clamp(stacked, low, high), stacked):
-                    act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
+                    self._name_bad_action(stacked, tensors)
             else:
                 # the extremes over the batch against the bounds: one pass over the actions (NaN
                 # propagates through min/max and fails both comparisons)
                 smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
                 if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
-                    act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
+                    self._name_bad_action(stacked, tensors)
             if stacked_step.set_stacked_forces(self, stacked):
                 return
-            tensors = per_agent()
+            tensors = list(stacked.unbind(0)) if tensors is None else tensors
         elif self.clamp_action and self.continuous_actions:
-            unbounded = [torch.full_like(low, float("inf")) for low in lows]
-            act.check_finite_and_range(per_agent(), [-u for u in unbounded], unbounded, [a.name for a in self.agents], kind)
+            self._name_bad_action(None, tensors, unbounded=True)
+            lows, highs = self._stacked_bounds()
             tensors = [torch.maximum(torch.minimum(a.float(), high), low) for a, low, high in zip(tensors, lows, highs)]
         else:
-            act.check_finite_and_range(per_agent(), lows, highs, [a.name for a in self.agents], kind)
+            self._name_bad_action(None, tensors)
         for agent, action, plan in zip(self.agents, tensors, self._action_plans()):
             self._apply_action(agent, action, plan)
+
+    def _name_bad_action(self, stacked: Optional[Tensor], tensors: Optional[list], unbounded: bool = False) -> None:
+        """Raise naming the first agent whose action is out of its bounds (or, ``unbounded``, not finite);
+        per agent, so only where a batched check found one or could not be made."""
+        per_agent = list(stacked.unbind(0)) if tensors is None else tensors
+        lows, highs = self._stacked_bounds()
+        if unbounded:
+            highs = [torch.full_like(low, float("inf")) for low in lows]
+            lows = [-high for high in highs]
+        kind = "continuous" if self.continuous_actions else "discrete"
+        act.check_finite_and_range(per_agent, lows, highs, [a.name for a in self.agents], kind)
 
     def _plain_actions(self, actions: list) -> bool:
         """Whether ``actions`` need none of :func:`~vmas_ros.envs.actions.to_action_tensor`'s conversions
@@ -344,16 +348,19 @@ class Environment(OwnRandomStreams):
         by_name = self.dict_spaces if dict_agent_names is None else dict_agent_names
         scenario, agents = self.scenario, self.agents
         # rewards first, then observations: scenarios may cache work in reward()
-        # each copied as it comes: a scenario may return a buffer it overwrites for the next agent
-        rewards = [scenario.reward(agent).clone() for agent in agents] if get_rewards else None
-        obs = None
+        rewards = obs = None
+        if get_rewards:
+            if scenario.fresh_rewards:
+                rewards = [scenario.reward(agent) for agent in agents]
+            else:  # each copied as it comes: a scenario may return a buffer it overwrites for the next agent
+                rewards = [scenario.reward(agent).clone() for agent in agents]
         if get_obs:
             obs = [scenario.observation(agent) for agent in agents]
             if not scenario.fresh_observations:
                 obs = [TorchUtils.recursive_clone(o) for o in obs]
-            if isinstance(scenario, BaseScenario):
-                scenario.env_observations_handed_out()
-        infos = [_own_info(scenario.info(agent)) for agent in agents] if get_infos else None
+        if (get_obs or get_rewards and scenario.fresh_rewards) and isinstance(scenario, BaseScenario):
+            scenario.env_observations_handed_out()  # what went out uncopied is theirs: compute afresh next
+        infos = [TorchUtils.recursive_clone(scenario.info(agent)) for agent in agents] if get_infos else None
         if by_name:
             names = [agent.name for agent in agents]
             rewards, obs, infos = (None if values is None else dict(zip(names, values))

@@ -109,7 +109,11 @@ def step_results(env) -> tuple:
     scenario, agents = env.scenario, env.agents
     hook = getattr(scenario, "stacked_rewards", None)
     rewards = hook() if hook is not None else None
-    rewards = torch.stack([scenario.reward(agent) for agent in agents]) if rewards is None else rewards.clone()
+    if rewards is None:  # each copied as it comes, unless fresh: a scenario may reuse one buffer for all agents
+        fresh = scenario.fresh_rewards
+        rewards = torch.stack([scenario.reward(agent) if fresh else scenario.reward(agent).clone() for agent in agents])
+    else:
+        rewards = rewards.clone()
     hook = getattr(scenario, "stacked_observations", None)
     obs = hook() if hook is not None else None
     if obs is None:

@@ -28,6 +28,10 @@ class BaseScenario(abc.ABC):
     #: environment then hands them out without the defensive copy it makes of VMAS
     #: scenarios' observations, which may be buffers the scenario updates in place.
     fresh_observations: bool = False
+    #: Set True in scenarios whose ``reward`` returns each agent a tensor of its own (not one shared
+    #: by agents) that the scenario never writes to again: the environment then hands the rewards out
+    #: without the copy it makes of VMAS scenarios' rewards.
+    fresh_rewards: bool = False
 
     def __init__(self) -> None:
         self._world = None

@@ -63,18 +63,21 @@ class Scenario(BaseScenario):
         self._agent_index = {agent.name: i for i, agent in enumerate(world.agents)}
         self._overlap = None  # see _overlap_thresholds
         self._few_envs = batch_dim < FEW_ENVS
+        self.fresh_rewards = self._few_envs  # a row of its own per agent (_few_envs_outputs)
         # fill the index and threshold caches now: filled while the step is traced they would split its graph
         self._overlap_thresholds(world.device, world.agents)
         self._seen_rows_on[("relative", world.device)] = torch.tensor(self._seen_flat_rows, device=world.device)
         return world
 
     def batched_outputs(self, q: torch.Tensor, v: torch.Tensor) -> tuple:
-        """The shared reward ``[B]``, then what the observations are read from.
+        """The shared reward, then what the observations are read from.
 
-        A few envs: every agent's observation ``[B, obs]``, a tuple (one pass
-        for all, see :func:`_few_envs_outputs`). Many envs: every entity's position
+        A few envs: every agent's copy of the reward ``[B]`` and every agent's
+        observation ``[B, obs]``, two tuples (one pass for all, see
+        :func:`_few_envs_outputs`). Many envs: every entity's position
         ``[N, B, 2]`` and every agent's velocity ``[A, B, 2]``, from which each
-        agent's observation is assembled on its own (:meth:`_agent_observation`).
+        agent's observation is assembled on its own (:meth:`_agent_observation`);
+        the reward ``[B]`` once.
         """
         if self._few_envs:
             seen = self._seen_rows_on.get(("relative", q.device))
@@ -91,6 +94,8 @@ class Scenario(BaseScenario):
             entity.set_pos(pos if env_index is None else pos.squeeze(0) if isinstance(env_index, int) else pos, batch_index=env_index)
 
     def reward(self, agent: Agent) -> torch.Tensor:
+        if self._few_envs:
+            return self.outputs()[0][self._agent_index[agent.name]]
         return self.outputs()[0]
 
     def _overlap_thresholds(self, device, agents=None) -> tuple:
@@ -167,7 +172,8 @@ def _many_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overl
 
 def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overlap_below: torch.Tensor,
                       seen: torch.Tensor) -> tuple:
-    """Rewards ``[B]`` and each agent's observation ``[B, obs]`` (a tuple) from the planar state ``[3, N, B]`` (landmarks first).
+    """Each agent's reward ``[B]`` and observation ``[B, obs]`` (two tuples, rows of one result each) from
+    the planar state ``[3, N, B]`` (landmarks first).
 
     ``overlap_below`` ``[A, A, 1]``: distance under which two agents overlap
     (negative for pairs that cannot); ``seen``: each agent's observed rows of
@@ -184,7 +190,7 @@ def _few_envs_outputs(q: torch.Tensor, v: torch.Tensor, n_landmarks: int, overla
     rows = torch.index_select(relative.flatten(0, 1), 0, seen).view(agents.shape[0], -1, *relative.shape[2:])
     own_vel = v[:2, n_landmarks:].permute(1, 2, 0)
     observations = torch.cat([agents, own_vel, rows.permute(0, 2, 1, 3).flatten(2)], dim=-1)
-    return rewards, observations.unbind(0)
+    return rewards.expand(agents.shape[0], -1).clone().unbind(0), observations.unbind(0)
 
 
 def _subtract_into(destination: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> None:
