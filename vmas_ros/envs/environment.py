@@ -464,31 +464,11 @@ class Environment(OwnRandomStreams):
     # ---------------------------------------------------------------- rendering
     def render(self, mode: str = "rgb_array", env_index: int = 0, agent_index_focus: Optional[int] = None,
                visualize_when_rgb: bool = False, plot_position_function=None, **kwargs):
-        """Draw env ``env_index`` headless into an RGB array [H, W, 3] (no display needed).
+        """Draw env ``env_index`` headless into an RGB array [H, W, 3] (no display needed); VMAS's keywords
+        are taken (:func:`vmas_ros.envs.rendering.render_env` says how)."""
+        from vmas_ros.envs.rendering import render_env
 
-        VMAS's keywords are taken: ``agent_index_focus`` centres the view on that
-        agent; ``visualize_when_rgb`` (show the frame in a window) has nothing
-        to do here, since no window is ever opened. VMAS's
-        ``plot_position_function`` heat maps are not drawn: passing one raises.
-        Other keywords go to ``vmas_ros.viz.scene.render_world``.
-        """
-        from vmas_ros.viz.scene import render_world
-
-        if mode not in ("rgb_array", "human"):
-            raise ValueError(f"render mode must be 'rgb_array' or 'human', got {mode!r}")
-        if not 0 <= env_index < self.num_envs:
-            raise ValueError(f"env_index {env_index} out of range for {self.num_envs} envs")
-        if plot_position_function is not None:
-            raise ValueError("render: plot_position_function (VMAS's heat map of a function of position) "
-                             "is not supported by vmas_ros's renderer; pass None")
-        kwargs = {**kwargs, **({} if agent_index_focus is None else {"agent_index_focus": agent_index_focus})}
-        extra = self.scenario.extra_render(env_index)
-        return render_world(
-            self.world, env_index=env_index, extra_geoms=extra,
-            width=self.scenario.viewer_size[0], height=self.scenario.viewer_size[1],
-            zoom=self.scenario.viewer_zoom, plot_bounds=self.scenario.visualize_semidims,
-            render_origin=self.scenario.render_origin, **kwargs,
-        )
+        return render_env(self, mode, env_index, agent_index_focus, plot_position_function, **kwargs)
 
     def to(self, device) -> None:
         self._device = torch.device(device)
