@@ -21,6 +21,8 @@ from vmas_ros.envs import stacked as stacked_step
 from vmas_ros.envs.limits import check_world_size
 from vmas_ros.envs.memory import check_memory
 from vmas_ros.envs.random_streams import OwnRandomStreams
+from vmas_ros.envs.randomisation import Randomisation
+from vmas_ros.envs.randomiser import Randomiser
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
 
@@ -55,6 +57,7 @@ class Environment(OwnRandomStreams):
         clamp_actions: bool = False,
         grad_enabled: bool = False,
         terminated_truncated: bool = False,
+        randomisation: Union[Randomisation, dict, None] = None,
         **kwargs,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
@@ -81,6 +84,8 @@ class Environment(OwnRandomStreams):
         check_memory(self.world, scenario)  # before the first reset or step allocates (envs/memory.py)
         self.agents = self.world.policy_agents
         self.n_agents = len(self.agents)
+        config = Randomisation.from_dict(randomisation)  # (envs/randomisation.py) off unless asked for
+        self.randomiser = Randomiser(self, config) if config.active() else None
         self.steps = torch.zeros(num_envs, device=self.device)
         observations = self.reset()
         self.action_space = self.get_action_space()
@@ -111,6 +116,8 @@ class Environment(OwnRandomStreams):
             self.seed(seed)
         with self._own_rng():
             self.scenario.env_reset_world_at(None)
+            if self.randomiser is not None:
+                self.randomiser.draw(None)
             self.steps = torch.zeros(self.num_envs, device=self.device)
             result = self._collect(return_observations, False, return_info, return_dones)
         return result[0] if result and len(result) == 1 else result
@@ -127,6 +134,8 @@ class Environment(OwnRandomStreams):
                 else:  # VMAS scenarios take one int at a time
                     for i in indices.tolist():
                         self.scenario.env_reset_world_at(i)
+                if self.randomiser is not None:
+                    self.randomiser.draw(indices)
                 self.steps[indices] = 0
             result = self._collect(return_observations, False, return_info, return_dones)
         return result[0] if result and len(result) == 1 else result
@@ -252,6 +261,8 @@ class Environment(OwnRandomStreams):
                 smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
                 if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
                     self._name_bad_action(stacked, tensors)
+            if self.randomiser is not None:  # what the agents execute: the commands delayed and lagged
+                stacked, tensors = self.randomiser.commands(stacked), None
             if stacked_step.set_stacked_forces(self, stacked):
                 return
             tensors = list(stacked.unbind(0)) if tensors is None else tensors
@@ -358,6 +369,8 @@ class Environment(OwnRandomStreams):
             obs = [scenario.observation(agent) for agent in agents]
             if not scenario.fresh_observations:
                 obs = [TorchUtils.recursive_clone(o) for o in obs]
+            if self.randomiser is not None and self.randomiser.config.acts_on_observations:
+                obs = self.randomiser.observation_list(obs)
         if (get_obs or get_rewards and scenario.fresh_rewards) and isinstance(scenario, BaseScenario):
             scenario.env_observations_handed_out()  # what went out uncopied is theirs: compute afresh next
         infos = [TorchUtils.recursive_clone(scenario.info(agent)) for agent in agents] if get_infos else None

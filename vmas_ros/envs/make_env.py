@@ -82,6 +82,10 @@ def make_env(
     default, steps eagerly and compiles once the run is long, at a step set by
     the workload alone, where a compiler for the device is present, as
     ``VMAS_ROS_COMPILE`` says (see ``vmas_ros.simulator.compile_default``).
+    ``randomisation`` (not in VMAS; a keyword, as the scenario's kwargs): a
+    ``Randomisation`` or its dict, the command latency, actuator lag, sensor
+    noise, lidar dropout and mass and drag scales drawn per env at every reset
+    (``vmas_ros.envs.randomisation``); None, the default: none.
     """
     from vmas_ros.scenarios import load
 

@@ -22,8 +22,11 @@ class OwnRandomStreams:
     """Mixin of ``Environment``: the env's random streams in ``_rng_state`` (needs ``self.device``)."""
 
     _rng_state: Optional[dict] = None
+    #: the seed the streams were last seeded with (what other streams of the env start from)
+    seed_given: int = 0
 
     def _seed_rng(self, seed: int) -> None:
+        self.seed_given = seed
         with torch.random.fork_rng(devices=self._cuda_devices()):
             torch.manual_seed(seed)
             self._rng_state = self._capture_rng()
@@ -82,5 +85,8 @@ class OwnRandomStreams:
         """Re-seed this env's own random streams (torch, numpy, random)."""
         seed = 0 if seed is None else int(seed)
         self._seed_rng(seed)
+        randomiser = getattr(self, "randomiser", None)  # randomisation draws from a stream of its own
+        if randomiser is not None:
+            randomiser.seed(seed)
         return [seed]
 

@@ -86,6 +86,7 @@ from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.neighbours import ClosePairs
 from vmas_ros.simulator.scenario import BaseScenario
+from vmas_ros.simulator.observation_layout import LidarColumns, ObservationLayout
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import ScenarioUtils, TorchUtils
 
@@ -340,6 +341,15 @@ class Scenario(BaseScenario):
 
     def observation(self, agent: Agent) -> Tensor:
         return self.stacked_observations()[self._index[agent.name]]
+
+    def observation_layout(self, agent: Agent) -> ObservationLayout:
+        """Own position and velocity first; then, from column 4 (6 after a diff-drive heading), the position
+        minus one goal or every goal; then the lidar's proximities (0: nothing seen)."""
+        to_goals = 6 if self.dynamics == "diff_drive" else 4
+        n_goals = self.n_agents if self.observe_all_goals else 1
+        position = ((0, 1),) + tuple((to_goals + 2 * k, 1) for k in range(n_goals))
+        lidar = LidarColumns(to_goals + 2 * n_goals, self.n_lidar_rays, self.lidar_range) if self.collisions else None
+        return ObservationLayout(position=position, velocity=((2, 1),), lidar=lidar)
 
     def info(self, agent: Agent) -> dict:
         i = self._index[agent.name]

@@ -12,6 +12,7 @@ from typing import Any, Callable, List, Optional
 import torch
 from torch import Tensor
 
+from vmas_ros.simulator.observation_layout import ObservationLayout
 from vmas_ros.simulator.utils import INITIAL_VIEWER_SIZE, VIEWER_DEFAULT_ZOOM
 
 __all__ = ["BaseScenario"]
@@ -143,6 +144,11 @@ class BaseScenario(abc.ABC):
     def info(self, agent) -> dict:
         """Extra per-agent metrics, each a tensor with the batch dimension first."""
         return {}
+
+    def observation_layout(self, agent) -> Optional[ObservationLayout]:
+        """Where ``agent``'s observation holds its own position, velocity and lidar (for observation noise in
+        training, ``vmas_ros.envs.randomisation``); None (the default): not described."""
+        return None
 
     def extra_render(self, env_index: int = 0) -> List:
         """Extra geoms (see simulator.rendering) drawn on top of env ``env_index``."""

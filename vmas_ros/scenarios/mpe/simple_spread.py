@@ -26,6 +26,7 @@ from vmas_ros.scenarios.common import greedy_first_match, read_kwargs
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.layout import as_pairs, complex_pairs
+from vmas_ros.simulator.observation_layout import ObservationLayout
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.thresholds import FEW_ENVS
 from vmas_ros.simulator.utils import Color
@@ -115,6 +116,11 @@ class Scenario(BaseScenario):
         if self._few_envs:
             return self.outputs()[1][index]
         return self._agent_observation(index)
+
+    def observation_layout(self, agent: Agent) -> ObservationLayout:
+        """Own position and velocity, then landmarks and other agents relative to the agent (minus its position)."""
+        relative = range(4, 2 * (len(self._seen_rows[self._agent_index[agent.name]]) + 2), 2)
+        return ObservationLayout(position=((0, 1),) + tuple((column, -1) for column in relative), velocity=((2, 1),))
 
     def _agent_observation(self, index: int) -> torch.Tensor:
         """Agent ``index``'s observation ``[B, obs]`` at many envs.
