@@ -13,6 +13,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Dict, Union
 
+from vmas_ros.envs.randomisation import Randomisation
+
 __all__ = ["TrainConfig", "ALGORITHM_NAMES", "load_config_file"]
 
 ALGORITHM_NAMES = ("cppo", "mappo", "ippo", "hetippo")
@@ -26,6 +28,9 @@ class TrainConfig:
     scenario: str = field(default="balance", metadata={"help": "scenario name (see `vmas-ros list`)"})
     scenario_kwargs: Dict[str, Any] = field(default_factory=dict,
                                             metadata={"help": "keyword arguments for the scenario (JSON object)"})
+    randomisation: Dict[str, Any] = field(default_factory=dict, metadata={
+        "help": "per-env command latency, actuator lag, sensor noise, lidar dropout, mass and drag scales drawn at "
+                "resets: JSON object of setting -> number or [low, high] (docs/training.md#randomisation)"})
     algorithm: str = field(default="mappo", metadata={"help": "cppo, mappo, ippo or hetippo (the paper's Figure 3)"})
     # --- how much data
     iterations: int = field(default=100, metadata={"help": "training iterations (collect a batch, then update)"})
@@ -75,6 +80,7 @@ class TrainConfig:
             raise ValueError(f"algorithm must be one of {ALGORITHM_NAMES}, got {self.algorithm!r}")
         if not isinstance(self.scenario_kwargs, dict):
             raise ValueError(f"scenario_kwargs must be a mapping, got {type(self.scenario_kwargs).__name__}")
+        Randomisation.from_dict(self.randomisation)  # names a bad setting
         for name in ("iterations", "frames_per_batch", "num_envs", "max_steps", "minibatch_size", "epochs",
                      "num_cells", "depth", "checkpoint_every", "collectors", "collector_cpus"):
             value = getattr(self, name)

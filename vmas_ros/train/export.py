@@ -12,11 +12,12 @@ from __future__ import annotations
 import json
 import warnings
 from pathlib import Path
-from typing import Any, Dict, Tuple, Union
+from typing import Any, Dict, Optional, Tuple, Union
 
 import torch
 from torch import nn
 
+from vmas_ros.envs.randomisation import Randomisation
 from vmas_ros.policy.onnx_policy import POLICY_FORMAT, POLICY_VERSION, sha256_of_file, validate_metadata
 from vmas_ros.train.algorithms import ALGORITHMS
 from vmas_ros.train.checkpoint import load_checkpoint
@@ -76,11 +77,14 @@ class DeterministicPolicy(nn.Module):
 
 
 def export_policy(actor_network: nn.Module, env_info: Dict[str, Any], scenario: str,
-                  scenario_kwargs: Dict[str, Any], algorithm: str, out_stem: Union[str, Path]) -> Tuple[Path, Path]:
+                  scenario_kwargs: Dict[str, Any], algorithm: str, out_stem: Union[str, Path],
+                  randomisation: Optional[Dict[str, Any]] = None) -> Tuple[Path, Path]:
     """Write ``<out_stem>.onnx`` and ``<out_stem>.json``; returns both paths.
 
     ``env_info`` is :func:`describe_env`'s dict. The graph is traced on CPU in
-    float32, whatever device the network trained on.
+    float32, whatever device the network trained on. ``randomisation``: what
+    it trained with (``vmas_ros.envs.randomisation``), recorded in the JSON as
+    every setting's ``[low, high]`` (all off when None).
     """
     import vmas_ros
 
@@ -106,6 +110,7 @@ def export_policy(actor_network: nn.Module, env_info: Dict[str, Any], scenario: 
         "scenario": scenario,
         "scenario_kwargs": dict(scenario_kwargs),
         "algorithm": algorithm,
+        "randomisation": Randomisation.from_dict(randomisation).to_dict(),
         "agents": list(env_info["agents"]),
         "observation_size": int(obs_size),
         "action_size": int(env_info["action_size"]),
@@ -153,4 +158,5 @@ def export_checkpoint(checkpoint: Union[str, Path], out_stem: Union[str, Path]) 
     network = build_actor_network(ALGORITHMS[algorithm], len(env_info["agents"]), env_info["observation_size"],
                                   env_info["action_size"], config["depth"], config["num_cells"], torch.device("cpu"))
     network.load_state_dict(state["actor"])
-    return export_policy(network, env_info, config["scenario"], config["scenario_kwargs"], algorithm, out_stem)
+    return export_policy(network, env_info, config["scenario"], config["scenario_kwargs"], algorithm, out_stem,
+                         randomisation=config.get("randomisation"))

@@ -48,7 +48,7 @@ __all__ = ["Trainer", "evaluate_policy"]
 def _make_env(config: TrainConfig, num_envs: int, seed: int):
     return vmas_ros.make_env(config.scenario, num_envs=num_envs, device=config.device, continuous_actions=True,
                              max_steps=config.max_steps, seed=seed, terminated_truncated=True,
-                             **config.scenario_kwargs)
+                             randomisation=config.randomisation or None, **config.scenario_kwargs)
 
 
 class Trainer:
@@ -95,7 +95,7 @@ class Trainer:
         self._ray_connected = connect(config.ray_address)
         env_kwargs = dict(scenario=config.scenario, num_envs=config.num_envs, continuous_actions=True,
                           max_steps=config.max_steps, seed=self.env_seed, terminated_truncated=True,
-                          **config.scenario_kwargs)
+                          randomisation=config.randomisation or None, **config.scenario_kwargs)
         return RayCollection(env_kwargs, self.agent.policy, config.steps_per_batch, config.collectors,
                              config.collector_cpus, config.collector_device, self.device, config.ray_address)
 
@@ -233,7 +233,8 @@ class Trainer:
             (self.out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
             summary["eval"] = result
         onnx_path, json_path = export_policy(self.agent.actor_network, self.env_info, config.scenario,
-                                             config.scenario_kwargs, config.algorithm, self.out / "policy")
+                                             config.scenario_kwargs, config.algorithm, self.out / "policy",
+                                             randomisation=config.randomisation)
         summary["onnx"], summary["policy_json"] = str(onnx_path), str(json_path)
         return summary
 
