@@ -27,8 +27,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
                             help="which benchmark: mpe (default; the VMAS paper's Fig. 2), suite (vmas_ros "
                                  "against VMAS on the project's workloads), node (sim_node's steps/s while "
                                  "publishing), process (whole short scripts against VMAS: time and memory), "
-                                 "jaxmarl (simple_spread's step against JaxMARL's) or torchrl (TorchRL's "
-                                 "multi-agent PPO loop at its tutorial's size, whole processes against VMAS)")
+                                 "jaxmarl (simple_spread's step against JaxMARL's), torchrl (TorchRL's "
+                                 "multi-agent PPO loop at its tutorial's size, whole processes against VMAS) or "
+                                 "randomisation (what training's randomisation costs navigation's step)")
     # dest is not ``num_envs``: cli.main compares args.num_envs with an int
     parser.add_argument("--num-envs", dest="bench_num_envs", type=int, nargs="+", default=list(DEFAULT_NUM_ENVS),
                         metavar="N", help="mpe: numbers of parallel envs (default: 1 10 100 1000)")
@@ -80,6 +81,11 @@ def add_bench_arguments(parser: argparse.ArgumentParser, with_benchmark_name: bo
     process.add_argument("--process-cold-cache", action="store_true",
                          help="process: each vmas_ros process compiles from an empty compile cache of its own "
                               "(a machine's first compile); default: torch's cache as earlier runs left it")
+    randomised = parser.add_argument_group("randomisation options (vmas-ros bench randomisation)")
+    randomised.add_argument("--randomisation-envs", type=int, default=None, metavar="N",
+                            help="randomisation: navigation's num_envs (default 600)")
+    randomised.add_argument("--randomisation-modes", nargs="+", default=None, metavar="MODE",
+                            help="randomisation: eager and/or compiled steps (default: both)")
     jaxmarl = parser.add_argument_group("jaxmarl options (vmas-ros bench jaxmarl)")
     jaxmarl.add_argument("--jaxmarl-python", default=None, metavar="PATH",
                          help="jaxmarl: the interpreter of an environment with JaxMARL installed "
@@ -143,6 +149,16 @@ def _run_torchrl(args: argparse.Namespace) -> int:
                    lambda: (torchrl_loop.run_torchrl_benchmark(args.repeats, progress=not args.no_progress), args.out))
 
 
+def _run_randomisation(args: argparse.Namespace) -> int:
+    """``vmas-ros bench randomisation``: navigation's step with and without randomisation
+    (:mod:`vmas_ros.bench.randomisation_bench`)."""
+    from vmas_ros.bench import randomisation_bench as bench
+
+    return _report("randomisation", bench, lambda: (bench.run_randomisation_benchmark(
+        args.randomisation_envs or bench.DEFAULT_NUM_ENVS, args.steps, args.repeats,
+        args.randomisation_modes or bench.MODES, progress=not args.no_progress), args.out))
+
+
 def run_bench_command(args: argparse.Namespace) -> int:
     """Run the benchmark from parsed ``add_bench_arguments`` options: 0 on success, 2 on bad arguments."""
     # looked up on the module at call time (no import cycle; patches of vmas_ros.bench.mpe apply)
@@ -166,6 +182,8 @@ def run_bench_command(args: argparse.Namespace) -> int:
         return _run_jaxmarl(args)
     if benchmark == "torchrl":
         return _run_torchrl(args)
+    if benchmark == "randomisation":
+        return _run_randomisation(args)
     num_envs = getattr(args, "bench_num_envs", None)
     if num_envs is None:
         num_envs = getattr(args, "num_envs", [1, 10, 100, 1000])

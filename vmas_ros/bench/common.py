@@ -16,7 +16,7 @@ _PEER_INSTALL = {"vmas": "pip install vmas==1.5.2", "mpe": "pip install mpe2"}
 #: next to the eager "vmas_ros" side by ``--modes eager compiled``; not one of SIDES (bench mpe has no such side)
 COMPILED_SIDE = "vmas_ros_compiled"
 _LABEL = {"vmas_ros": "vmas_ros", "vmas": "VMAS", "mpe": "MPE", COMPILED_SIDE: "vmas_ros compiled"}
-BENCHMARKS = ("mpe", "suite", "node", "process", "jaxmarl", "torchrl")
+BENCHMARKS = ("mpe", "suite", "node", "process", "jaxmarl", "torchrl", "randomisation")
 #: The default mode's long run, as the benchmarks time it: a warm-up steps on through the default mode's
 #: switch to the compiled step when that comes within this many steps; a later switch is timed eager
 DEFAULT_MODE_WARMUP_MAX_STEPS = 20_000
