@@ -36,6 +36,7 @@ except ImportError:  # a torch without dynamo's C++ guards
     _TensorGuards = None
 
 from vmas_ros.simulator.background_compile import copy_inputs
+from vmas_ros.simulator.structure_code import PRIMITIVES
 from vmas_ros.simulator.structure_code import TENSOR as _TENSOR
 from vmas_ros.simulator.structure_code import builder, picker
 from vmas_ros.simulator.tracing import traced
@@ -61,7 +62,6 @@ class NotTraceable(Exception):
 _OPTIONS = {"config_patches": {"size_asserts": False}}
 #: compiled signatures per function before it declines: more means its inputs' shapes keep changing
 MAX_SIGNATURES = 8
-_PRIMITIVE = (int, float, bool, str, type(None))
 
 
 def _same_metadata(tensors: List[torch.Tensor]) -> Callable[..., bool]:
@@ -98,7 +98,7 @@ def _flatten(value, tensors: List[torch.Tensor], signature: list) -> object:
         return type(value), {name: _flatten(getattr(value, name), tensors, signature) for name in names}
     # Python values are part of the signature; other objects (tables, parameters, functions) are the
     # caller's layout, which it keys on itself (LayoutCompiled): a trace reads them as the first call had them
-    signature.append(value if type(value) in _PRIMITIVE else type(value))
+    signature.append(value if type(value) in PRIMITIVES else type(value))
     return "C", value
 
 
@@ -217,7 +217,7 @@ class DirectGraph:
             entry = self._graphs[key] = (compiled, builder(output))
         route = self._route
         if route is None or route[0](args) is None:  # a new structure: the route follows it
-            route = self._route = (picker(structure, len(tensors), varying), [])
+            route = self._route = (picker(structure, varying), [])
         route[1].append((_same_metadata(tensors), any(t.requires_grad for t in tensors), entry))
         return entry[0], tensors, entry[1]
 

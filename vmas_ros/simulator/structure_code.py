@@ -22,10 +22,11 @@ from typing import Callable, List, Optional, Sequence
 
 from torch import Tensor
 
-__all__ = ["TENSOR", "picker", "builder"]
+__all__ = ["PRIMITIVES", "TENSOR", "picker", "builder"]
 
 TENSOR = "T"  # a slot for the next tensor in a flattened structure
-_PRIMITIVE = (int, float, bool, str, type(None))
+#: Python values a structure holds as they are (compared by value; other objects by type)
+PRIMITIVES = (int, float, bool, str, type(None))
 
 #: ``pick(value, out)``: append ``value``'s tensors to ``out``; False when ``value`` has another structure
 Pick = Callable[[object, list], bool]
@@ -74,7 +75,7 @@ def _pick_node(node) -> Pick:
     kind, content = node
     if kind == "C":  # a constant: primitives by value, other objects by type, as the signature keys them
         expected = type(content)
-        if expected in _PRIMITIVE:
+        if expected in PRIMITIVES:
             return lambda value, out: type(value) is expected and value == content
         return lambda value, out: type(value) is expected
     if kind in (tuple, list):
@@ -90,8 +91,8 @@ def _pick_node(node) -> Pick:
     return _nested(kind, get, len(items), sized, [_pick_node(item) for item in items])
 
 
-def picker(structure, count: int, positions: Optional[Sequence[int]] = None) -> Callable[[tuple], Optional[list]]:
-    """``pick(args)``: the ``count`` tensors of ``args`` in the order ``_flatten`` gives them, or None when
+def picker(structure, positions: Optional[Sequence[int]] = None) -> Callable[[tuple], Optional[list]]:
+    """``pick(args)``: the tensors of ``args`` in the order ``_flatten`` gives them, or None when
     ``args`` does not have ``structure`` (another container type or length, another constant).
 
     ``positions``: ``structure`` is that of the tuple of ``args[position]`` for each position (the
@@ -105,9 +106,6 @@ def picker(structure, count: int, positions: Optional[Sequence[int]] = None) -> 
             raise AssertionError(f"expected the structure of {len(positions)} arguments, got {structure!r}")
         top, needed = _pick_node(structure), max(positions, default=-1) + 1
         select = _getter(itemgetter, list(positions)) if positions else (lambda args: ())
-    counted = _count(structure)
-    if counted != count:
-        raise AssertionError(f"structure holds {counted} tensors, expected {count}")
 
     def pick(args) -> Optional[list]:
         if len(args) < needed:
@@ -115,16 +113,6 @@ def picker(structure, count: int, positions: Optional[Sequence[int]] = None) -> 
         out: list = []
         return out if top(select(args), out) else None
     return pick
-
-
-def _count(node) -> int:
-    if node == TENSOR:
-        return 1
-    kind, content = node
-    if kind == "C":
-        return 0
-    items = content if kind in (tuple, list) else list(content.values())
-    return sum(_count(item) for item in items)
 
 
 def _build_node(node, position: List[int]) -> Callable[[Sequence], object]:
