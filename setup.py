@@ -20,6 +20,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.json") + glob("config/*.rviz"))),
+        (f"share/{PACKAGE}/config/train", sorted(glob("config/train/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.py"))),
     ],
     # torch is deliberately unpinned here; scripts/setup.sh installs the pinned

@@ -8,14 +8,14 @@ import torch
 import vmas_ros
 from vmas_ros.train.config import TrainConfig, load_config_file
 
-RECIPES = sorted((Path(__file__).resolve().parents[2] / "config").glob("train_*.yaml"))
+RECIPES = sorted((Path(__file__).resolve().parents[2] / "config" / "train").glob("*.yaml"))
 #: robot_fleet's defaults in deploy-eval: 50 ms latency, 0.1 s lag, odometry noise 0.01 m and 0.02 m/s
 FLEET = {"command_latency": 0.05, "actuator_lag": 0.1, "position_noise": 0.01, "velocity_noise": 0.02}
 
 
 def test_the_three_recipes_are_there():
-    assert [path.stem for path in RECIPES] == ["train_navigation_diff_drive", "train_navigation_holonomic",
-                                               "train_simple_spread"]
+    assert [path.stem for path in RECIPES] == ["navigation_diff_drive", "navigation_holonomic",
+                                               "simple_spread"]
 
 
 @pytest.mark.parametrize("path", RECIPES, ids=lambda path: path.stem)
