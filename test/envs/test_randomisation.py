@@ -154,3 +154,15 @@ def test_a_compiled_step_reads_the_scales_drawn_at_each_reset():
             for env in (eager, compiled):
                 env.reset_at(torch.tensor([1, 2]))
     assert compiled.world.physics_compiled and compiled.world.tables.scales is not None
+
+
+def test_a_layout_wider_than_the_observations_is_refused_naming_both():
+    from vmas_ros.scenarios.navigation import Scenario
+    from vmas_ros.simulator.observation_layout import ObservationLayout
+
+    class _WideLayout(Scenario):
+        def observation_layout(self, agent):
+            return ObservationLayout(position=((40, 1),))
+
+    with pytest.raises(ValueError, match="the observation layout needs 42 columns, but the observations have 18"):
+        vmas_ros.make_env(_WideLayout(), num_envs=2, compile_physics=False, randomisation={"position_noise": 0.01})

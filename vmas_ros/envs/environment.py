@@ -369,7 +369,7 @@ class Environment(OwnRandomStreams):
             obs = [scenario.observation(agent) for agent in agents]
             if not scenario.fresh_observations:
                 obs = [TorchUtils.recursive_clone(o) for o in obs]
-            if self.randomiser is not None and self.randomiser.config.acts_on_observations:
+            if self.randomiser is not None and self.randomiser.on_observations:
                 obs = self.randomiser.observation_list(obs)
         if (get_obs or get_rewards and scenario.fresh_rewards) and isinstance(scenario, BaseScenario):
             scenario.env_observations_handed_out()  # what went out uncopied is theirs: compute afresh next

@@ -4,7 +4,7 @@ A policy trained on the exact engine has never seen a command arrive late, a
 base that follows its command with a lag, a noisy odometry or a lidar ray
 that returns nothing. :class:`Randomisation` says how much of each to train
 with; ``make_env(..., randomisation=...)`` (and ``vmas-ros train
---randomise-*``) applies it. Every setting is a range ``(low, high)``, drawn
+--randomisation JSON``) applies it. Every setting is a range ``(low, high)``, drawn
 uniformly per agent and per env at every reset of that env (a single number:
 that value everywhere), with the env's own random streams:
 

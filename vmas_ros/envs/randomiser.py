@@ -44,6 +44,10 @@ class Randomiser:
         self._dt = float(env.world.dt)
         self._shape = (env.n_agents, env.num_envs)
         self._active = [name for name in SETTINGS if config.active(name)]
+        # what runs in a step, decided once (the config is frozen)
+        self._latency, self._lag = config.active("command_latency"), config.active("actuator_lag")
+        #: whether the observations handed out go through observations()
+        self.on_observations = config.acts_on_observations
         self.generator = torch.Generator(device=env.device)
         self.seed(env.seed_given)
         self.params: Dict[str, Tensor] = {name: torch.full(self._shape, SETTINGS[name][1], device=env.device)
@@ -93,10 +97,10 @@ class Randomiser:
             values = (torch.rand(n_agents, count, device=device, generator=self.generator) * (high - low) + low
                       if high > low else low)
             self.params[name][:, columns] = values
-        if self.config.active("command_latency"):
+        if self._latency:
             self._delay = torch.floor(self.params["command_latency"] / self._dt + HALF_UP).long().clamp_(0, self.max_delay)
             self._reads = None
-        if self.config.active("actuator_lag"):
+        if self._lag:
             tau = self.params["actuator_lag"]  # 0: no lag, the command is executed as it comes (alpha 1)
             alpha = 1 - torch.exp(-self._dt / tau.clamp_min(torch.finfo(tau.dtype).tiny))
             self._alpha = torch.where(tau > 0, alpha, torch.ones_like(alpha)).unsqueeze(-1)
@@ -132,7 +136,7 @@ class Randomiser:
     def commands(self, given: Tensor) -> Tensor:
         """What each agent executes this step, ``[A, B, size]``, from the commands ``given`` now."""
         executed = given
-        if self.config.active("command_latency"):
+        if self._latency:
             if self._history is None:
                 self._history = torch.zeros((self.max_delay + 1) * given.shape[0] * given.shape[1], given.shape[2],
                                             dtype=given.dtype, device=given.device)
@@ -143,7 +147,7 @@ class Randomiser:
             self._history[self._slot * rows:(self._slot + 1) * rows] = given.reshape(rows, -1)
             executed = self._history.index_select(0, self._reads[self._slot]).view(given.shape)
             self._slot = (self._slot + 1) % (self.max_delay + 1)
-        if self.config.active("actuator_lag"):
+        if self._lag:
             if self._executed is None:
                 self._executed = torch.zeros_like(given)
             self._executed = torch.lerp(self._executed, executed, self._alpha)
@@ -155,6 +159,9 @@ class Randomiser:
         """Every agent's observation ``[A, B, O]`` as a robot's sensors would give it (a new tensor)."""
         layout, shape = self._layout, obs.shape
         if self._projection is None or self._projection.shape[1] != shape[2]:
+            if layout.width_needed() > shape[2]:
+                raise ValueError(f"the observation layout needs {layout.width_needed()} columns, but the "
+                                 f"observations have {shape[2]}")
             self._projection = _projection(layout, shape[2], obs)
             self._perturb = WorldKernel(self._env.world, partial(_perturbed, lidar=None if layout.lidar is None else (
                 layout.lidar.start, layout.lidar.count, float(layout.lidar.max_value), float(layout.lidar.miss))))

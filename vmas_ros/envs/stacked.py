@@ -121,7 +121,7 @@ def step_results(env) -> tuple:
         obs = _stack(per_agent)
         if obs is None:
             obs = per_agent if scenario.fresh_observations else [TorchUtils.recursive_clone(o) for o in per_agent]
-    if env.randomiser is not None and env.randomiser.config.acts_on_observations:  # (tensor observations only)
+    if env.randomiser is not None and env.randomiser.on_observations:  # (tensor observations only)
         obs = env.randomiser.observations(obs) if isinstance(obs, Tensor) else env.randomiser.observation_list(obs)
     if isinstance(scenario, BaseScenario):
         scenario.env_observations_handed_out()

@@ -85,8 +85,8 @@ from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 from vmas_ros.simulator.heuristic_policy import BaseHeuristicPolicy
 from vmas_ros.simulator.neighbours import ClosePairs
-from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.observation_layout import LidarColumns, ObservationLayout
+from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.sensors import Lidar
 from vmas_ros.simulator.utils import ScenarioUtils, TorchUtils
 
