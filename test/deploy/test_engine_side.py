@@ -48,6 +48,18 @@ def test_navigation_goals_are_per_robot_and_done_times_follow_the_env():
         assert all(d < 0.2 for d in episode["final_distance"])
 
 
+def test_end_at_done_cuts_each_episode_where_every_robot_first_stands_on_its_goal():
+    whole = engine_side.engine_episodes(SeekGoal(), "navigation", {"n_agents": 2}, episodes=2, seed=0, seconds=12.0)
+    cut = engine_side.engine_episodes(SeekGoal(), "navigation", {"n_agents": 2}, episodes=2, seed=0, seconds=12.0,
+                                      end_at_done=True)
+    assert whole["starts"] == cut["starts"]
+    for full, short in zip(whole["episodes"], cut["episodes"]):
+        assert short["all_at_goal_time"] == pytest.approx(full["all_at_goal_time"]) == short["duration"]
+        assert full["duration"] == pytest.approx(12.0)
+        assert all(d <= 0.1 for d in short["final_distance"]), "the cut lands on the first done step"
+        assert short["robot_robot"] <= full["robot_robot"]
+
+
 def test_each_contact_counts_once_when_it_begins():
     """Two robots of radius 0.1 along x: they meet, stay in contact, part, and meet again: two onsets."""
     gaps = [1.0, 0.5, 0.19, 0.15, 0.18, 0.25, 0.19, 0.5]

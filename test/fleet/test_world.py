@@ -135,3 +135,15 @@ def test_the_world_scan_sees_the_other_robot_from_the_robot_frame():
     assert np.isinf(ranges[0, :80]).all()
     # robot 1 faces +x; robot 0 lies behind it, at angle -pi: ray 0
     assert ranges[1, 0] == pytest.approx(0.9, abs=1e-6)
+
+
+def test_end_on_goals_ends_an_episode_when_every_robot_stands_on_its_goal():
+    # robot 0 starts 0.5 m below its goal, facing it; robot 1 starts on its goal
+    ended = keep_commanding(world(episode_seconds=5.0, end_on_goals=True), 0, (0.5, 0.0, 0.0), 0.0, 1.0)
+    assert [r["ended_by"] for r in ended] == ["goals"]
+    # within goal_radius (0.1 m) after 0.4 m at 0.5 m/s, one 10 ms step later at most
+    assert ended[0]["duration"] == pytest.approx(0.8, abs=0.011) == ended[0]["all_at_goal_time"]
+    # without it the same episode runs to its time, and one with landmarks (no own goals) always does
+    assert keep_commanding(world(episode_seconds=5.0), 0, (0.5, 0.0, 0.0), 0.0, 1.0) == []
+    w = world(episodes=TWO[1:], episode_seconds=0.5, end_on_goals=True)
+    assert [r["ended_by"] for r in run(w, 0.0, 0.6)] == ["time"]

@@ -42,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lag", type=float, default=0.1, help="fleet velocity lag time constant, s (default 0.1)")
     parser.add_argument("--odom-noise", default="0.01,0.01,0.02",
                         help="fleet odometry noise sigmas: position m, yaw rad, velocity m/s (default 0.01,0.01,0.02)")
+    parser.add_argument("--end-at-done", action="store_true",
+                        help="end an episode with one goal per robot once every robot stands on its goal, in both "
+                             "(robot_fleet's end_on_goals): coverage is taken there and later contacts do not count")
     parser.add_argument("--headings", choices=("auto", "engine", "random"), default="auto",
                         help="fleet start headings: engine's, or random; auto: engine's where the agents turn, "
                              "random where they never do (default auto)")
@@ -150,7 +153,8 @@ def _run(args: argparse.Namespace) -> int:
     engine = {"episodes": [], "starts": []}
     labels = []
     for seed in seeds:
-        part = engine_side.engine_episodes(policy, scenario, kwargs, args.episodes_per_seed, seed, args.seconds)
+        part = engine_side.engine_episodes(policy, scenario, kwargs, args.episodes_per_seed, seed, args.seconds,
+                                           end_at_done=args.end_at_done)
         engine.update({k: v for k, v in part.items() if k not in ("episodes", "starts")})
         engine["episodes"] += part["episodes"]
         engine["starts"] += part["starts"]
@@ -161,7 +165,8 @@ def _run(args: argparse.Namespace) -> int:
                     "robot_radius": engine["radius"], "goal_radius": engine["goal_radius"], "drive": args.drive,
                     "use_stamped_cmd_vel": not args.twist, "command_latency": args.latency,
                     "velocity_lag": args.lag, "odom_noise_position": noise[0], "odom_noise_yaw": noise[1],
-                    "odom_noise_velocity": noise[2], "seed": seeds[0], **fleet_extra}
+                    "odom_noise_velocity": noise[2], "end_on_goals": args.end_at_done, "seed": seeds[0],
+                    **fleet_extra}
     policy_params = {"policy_path": str(Path(args.policy).resolve()), "adapter": adapter or "",
                      "output": "cmd_vel", "use_stamped_cmd_vel": not args.twist, "base": args.drive,
                      "cmd_vel_scale": scale, "rate_hz": 1.0 / engine["dt"], **policy_extra}

@@ -61,7 +61,8 @@ def _first_time(mask: np.ndarray, times: np.ndarray) -> np.ndarray:
 
 
 def engine_episodes(policy, scenario: str, kwargs: Dict[str, Any], episodes: int, seed: int, seconds: float,
-                    goal_radius: Optional[float] = None, device: str = "cpu") -> Dict[str, Any]:
+                    goal_radius: Optional[float] = None, device: str = "cpu",
+                    end_at_done: bool = False) -> Dict[str, Any]:
     """Run ``policy`` for ``episodes`` episodes of ``seconds`` from the envs' resets with ``seed``.
 
     Robots cannot start inside one another, while some scenarios (simple_spread)
@@ -70,6 +71,9 @@ def engine_episodes(policy, scenario: str, kwargs: Dict[str, Any], episodes: int
     (``env_index`` says which). Returns ``{"dt", "radius", "goal_radius",
     "starts": [{"robots", "goals"}], "episodes": [per-episode metrics]}``.
     ``goal_radius`` defaults to the agents' radius (navigation's ``done`` rule).
+    With ``end_at_done`` an episode with one goal per robot ends where every
+    robot first stood on its goal (as robot_fleet's ``end_on_goals``): its
+    coverage is taken there, and no collision after it counts.
     """
     import vmas_ros
 
@@ -96,15 +100,24 @@ def engine_episodes(policy, scenario: str, kwargs: Dict[str, Any], episodes: int
     collisions, separation = contact_onsets(track, radius)
     records: List[Dict[str, Any]] = []
     for b in kept:
-        record = {"env_index": int(b), "coverage": _coverage(final[b, :, :2], goals[b]),
-                  "robot_robot": int(collisions[b]), "min_separation": _plain(separation[b])}
+        end = len(track)  # steps of this episode's track that count, start included
+        if per_robot and end_at_done:
+            done = (np.linalg.norm(track[:, b] - goals[b][None], axis=-1) <= goal_radius).all(axis=1)
+            end = int(done.argmax()) + 1 if done.any() else end
+        if end < len(track):
+            cut_collisions, cut_separation = contact_onsets(track[:end, b:b + 1], radius)
+            onsets, closest, last = int(cut_collisions[0]), cut_separation[0], track[end - 1, b]
+        else:
+            onsets, closest, last = int(collisions[b]), separation[b], final[b, :, :2]
+        record = {"env_index": int(b), "coverage": _coverage(last, goals[b]), "robot_robot": onsets,
+                  "min_separation": _plain(closest), "duration": float(times[end - 1])}
         if per_robot:
-            distance = np.linalg.norm(track[:, b] - goals[b][None], axis=-1)  # [T, n]
+            distance = np.linalg.norm(track[:end, b] - goals[b][None], axis=-1)  # [T, n]
             within = distance <= goal_radius
-            reached = _first_time(within, times)
+            reached = _first_time(within, times[:end])
             record.update(time_to_goal=[_plain(t) for t in reached],
                           all_reached_time=None if np.isnan(reached).any() else float(reached.max()),
-                          all_at_goal_time=_plain(_first_time(within.all(axis=1), times)),
+                          all_at_goal_time=_plain(_first_time(within.all(axis=1), times[:end])),
                           final_distance=distance[-1].tolist())
         records.append(record)
     starts = [{"robots": start_poses[b].tolist(), "goals": goals[b].tolist()} for b in kept]

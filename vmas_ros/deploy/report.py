@@ -14,7 +14,8 @@ from typing import Any, Dict, List, Optional
 
 #: the fleet parameters a table states: the conditions the policy met on the fleet
 CONDITIONS = ("drive", "use_stamped_cmd_vel", "command_latency", "velocity_lag", "odom_noise_position",
-              "odom_noise_yaw", "odom_noise_velocity", "max_linear_speed", "max_angular_speed", "scan_rays")
+              "odom_noise_yaw", "odom_noise_velocity", "max_linear_speed", "max_angular_speed", "scan_rays",
+              "end_on_goals")
 
 
 def _mean(values: List[Optional[float]]) -> Optional[float]:

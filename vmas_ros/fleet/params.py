@@ -177,6 +177,8 @@ FLEET_PARAMS = ParamTable("robot_fleet", [
     Param("exit_after_last", True, "exit with code 0 after the last episode; false: start again from the first"),
     Param("wait_for_commands", False, "hold the robots and the first episode's clock until every robot's cmd_vel "
           "has a publisher (an evaluation then starts when its controller is up)"),
+    Param("end_on_goals", False, "end an episode once every robot stands within goal_radius of its own goal at "
+          "once (navigation's done; only with one goal per robot)"),
     Param("goal_radius", 0.1, "a robot whose centre is this close to its goal has reached it, m", minimum=0.0,
           strict=True),
     Param("goals_topic", "landmarks/poses", "PoseArray of every goal (sim_node's landmark topic)", check=_topic),

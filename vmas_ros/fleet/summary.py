@@ -32,8 +32,9 @@ from vmas_ros.fleet.episodes import Episode
 
 __all__ = ["EpisodeTracker", "coverage", "document", "write_atomic", "ENDINGS"]
 
-#: why an episode ended: its time was up, ~/reset asked, or the node stopped during it
-ENDINGS = ("time", "reset", "shutdown")
+#: why an episode ended: its time was up, every robot stood on its goal (``end_on_goals``), ~/reset asked, or
+#: the node stopped during it
+ENDINGS = ("time", "goals", "reset", "shutdown")
 
 
 def _plain(value: float) -> Optional[float]:
@@ -83,6 +84,11 @@ class EpisodeTracker:
                 self.all_at_goal_time = self.elapsed
         if len(pose) > 1:
             self.min_separation = min(self.min_separation, float(pairwise_distance(pose[:, :2]).min()))
+
+    @property
+    def all_at_goal(self) -> bool:
+        """Whether every robot has stood within ``goal_radius`` of its own goal at once (navigation's done)."""
+        return not math.isnan(self.all_at_goal_time)
 
     def reached(self) -> int:
         """How many robots have reached their goal so far."""

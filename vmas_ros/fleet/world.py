@@ -8,7 +8,8 @@ own, so every behaviour here is checked without ROS and without waiting.
 
 One step: the commands due at its start (latency, timeout) -> kinematics (limiter, lag,
 integration) -> discs pushed apart and kept inside the walls -> contact
-onsets and goals noted -> the episode ends if its time is up. A step never
+onsets and goals noted -> the episode ends if its time is up (or, with
+``end_on_goals``, once every robot stands on its goal). A step never
 crosses the end of an episode: the last one is shortened to land on it, so
 durations are exact.
 """
@@ -71,7 +72,7 @@ class FleetWorld:
         self.episode_number += 1
 
     def end_episode(self, ended_by: str) -> dict:
-        """End the running episode (``time``, ``reset``) and start the next; returns its record."""
+        """End the running episode (``time``, ``goals``, ``reset``) and start the next; returns its record."""
         record = self.tracker.record(self.state.pose, ended_by)
         self.records.append(record)
         following = self.index + 1
@@ -94,7 +95,7 @@ class FleetWorld:
 
     @property
     def complete(self) -> bool:
-        """Whether every planned episode ran to its end (by time or ``~/reset``)."""
+        """Whether every planned episode ran to its end (by time, its goals or ``~/reset``)."""
         ended = [r for r in self.records if r["ended_by"] != "shutdown"]
         return len(ended) >= len(self.episodes)
 
@@ -120,7 +121,9 @@ class FleetWorld:
         ended = []
         if dt > 0:
             self._advance(dt, start)
-        if limit > 0 and self.tracker.elapsed >= limit - 1e-9:
+        if self.params.end_on_goals and self.tracker.all_at_goal:
+            ended.append(self.end_episode("goals"))
+        elif limit > 0 and self.tracker.elapsed >= limit - 1e-9:
             ended.append(self.end_episode("time"))
         return ended
 
