@@ -21,7 +21,8 @@ def test_a_navigation_policy_runs_in_the_engine_and_on_the_fleet_from_the_same_s
                           scenario="navigation", scenario_kwargs={"n_agents": 2})
     out = tmp_path / "eval"
     code = main(["deploy-eval", "--policy", str(policy), "--seeds", "2", "--episodes-per-seed", "2",
-                 "--seconds", "4", "--out", str(out), "--quiet", "--policy-param", "observation_timeout:=0.3"])
+                 "--seconds", "4", "--end-at-done", "--out", str(out), "--quiet",
+                 "--policy-param", "observation_timeout:=0.3"])
     assert code == 0, (out / "robot_fleet.log").read_text() if (out / "robot_fleet.log").exists() else ""
     found = json.loads((out / "report.json").read_text())
     rows, totals = found["rows"], found["totals"]
@@ -32,8 +33,13 @@ def test_a_navigation_policy_runs_in_the_engine_and_on_the_fleet_from_the_same_s
     for start, episode in zip(engine["starts"], fleet["episodes"]):
         assert np.allclose(np.array(start["robots"])[:, :2], np.array(episode["start"]["robots"])[:, :2])
         assert np.allclose(start["goals"], episode["start"]["goals"])
-        assert episode["duration"] == pytest.approx(4.0) and episode["ended_by"] == "time"
-    assert fleet["parameters"]["command_latency"] == 0.05 and fleet["parameters"]["use_stamped_cmd_vel"]
+        # --end-at-done: an episode ends at 4 s, or where every robot first stood on its goal
+        if episode["ended_by"] == "goals":
+            assert episode["duration"] == pytest.approx(episode["all_at_goal_time"]) < 4.0
+        else:
+            assert episode["ended_by"] == "time" and episode["duration"] == pytest.approx(4.0)
+    parameters = fleet["parameters"]
+    assert parameters["command_latency"] == 0.05 and parameters["use_stamped_cmd_vel"] and parameters["end_on_goals"]
     # the policy drove the fleet's robots towards their goals, as in the engine
     for row, ours, theirs in zip(rows, engine["episodes"], fleet["episodes"]):
         start = np.linalg.norm(np.array(theirs["start"]["robots"])[:, :2] - np.array(theirs["start"]["goals"]), axis=1)

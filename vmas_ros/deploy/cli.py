@@ -39,6 +39,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="policy_node's cmd_vel_scale; auto: the speed a held action settles at in the engine "
                              "(dt / (mass x drag) for force-driven agents, 1 for velocity commands)")
     parser.add_argument("--latency", type=float, default=0.05, help="fleet command latency, s (default 0.05)")
+    parser.add_argument("--latency-sweep", default="", metavar="S,S,...",
+                        help="run the fleet once per command latency (s, e.g. 0,0.05,0.1,0.15,0.2) instead of at "
+                             "--latency, each in its own subfolder, and write sweep.md/.json/.png: where the fleet's "
+                             "success falls below 90%% of the engine's")
     parser.add_argument("--lag", type=float, default=0.1, help="fleet velocity lag time constant, s (default 0.1)")
     parser.add_argument("--odom-noise", default="0.01,0.01,0.02",
                         help="fleet odometry noise sigmas: position m, yaw rad, velocity m/s (default 0.01,0.01,0.02)")
@@ -125,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from vmas_ros.deploy import engine_side, fleet_side, report
+    from vmas_ros.deploy import engine_side, fleet_side, report, sweep
     from vmas_ros.policy.onnx_policy import OnnxPolicy
 
     seeds = parse_seeds(args.seeds)
@@ -134,6 +138,7 @@ def _run(args: argparse.Namespace) -> int:
     noise = [float(v) for v in args.odom_noise.split(",")]
     if len(noise) != 3 or min(noise) < 0:
         raise ValueError(f"--odom-noise must be three sigmas >= 0 (position, yaw, velocity), got {args.odom_noise!r}")
+    latencies = sweep.parse_latencies(args.latency_sweep) if args.latency_sweep else []
     if args.episodes_per_seed < 1 or args.seconds <= 0:
         raise ValueError(f"--episodes-per-seed must be >= 1 and --seconds > 0, got {args.episodes_per_seed} and "
                          f"{args.seconds}")
@@ -171,19 +176,29 @@ def _run(args: argparse.Namespace) -> int:
                      "output": "cmd_vel", "use_stamped_cmd_vel": not args.twist, "base": args.drive,
                      "cmd_vel_scale": scale, "rate_hz": 1.0 / engine["dt"], **policy_extra}
     starts = fleet_starts(engine["starts"], args.headings, np.random.default_rng(seeds[0]))
-    summary = fleet_side.fleet_episodes(out, starts, args.seconds, fleet_params, policy_params,
-                                        progress=not args.quiet)
+    command = "vmas-ros deploy-eval " + " ".join(shlex.quote(a) for a in _own_arguments())
 
-    rows = report.pair_episodes(engine, summary, labels)
-    found = report.totals(rows, engine["per_robot_goals"])
-    heading = {"policy": args.policy, "scenario": scenario, "scenario_kwargs": json.dumps(kwargs),
-               "command": "vmas-ros deploy-eval " + " ".join(shlex.quote(a) for a in _own_arguments()),
-               "fleet": summary["parameters"],
-               "policy_node": ", ".join(f"{k} {v}" for k, v in policy_params.items() if k != "policy_path")}
-    (out / "report.json").write_text(json.dumps({"heading": heading, "rows": rows, "totals": found}, indent=1))
-    text = report.markdown(rows, found, engine["per_robot_goals"], heading)
-    (out / "report.md").write_text(text)
-    report.plot(rows, engine["per_robot_goals"], out / "comparison.png",
-                f"{scenario}: engine vs robot_fleet ({args.drive}, latency {args.latency} s, lag {args.lag} s)")
+    def fleet_report(folder: Path, latency: float) -> Dict[str, Any]:
+        """The fleet's run at ``latency`` into ``folder``, its report written there; returns the totals."""
+        summary = fleet_side.fleet_episodes(folder, starts, args.seconds, {**fleet_params, "command_latency": latency},
+                                            policy_params, progress=not args.quiet)
+        rows = report.pair_episodes(engine, summary, labels)
+        found = report.totals(rows, engine["per_robot_goals"])
+        heading = {"policy": args.policy, "scenario": scenario, "scenario_kwargs": json.dumps(kwargs),
+                   "command": command, "fleet": summary["parameters"],
+                   "policy_node": ", ".join(f"{k} {v}" for k, v in policy_params.items() if k != "policy_path")}
+        (folder / "report.json").write_text(json.dumps({"heading": heading, "rows": rows, "totals": found}, indent=1))
+        text = report.markdown(rows, found, engine["per_robot_goals"], heading)
+        (folder / "report.md").write_text(text)
+        report.plot(rows, engine["per_robot_goals"], folder / "comparison.png",
+                    f"{scenario}: engine vs robot_fleet ({args.drive}, latency {latency} s, lag {args.lag} s)")
+        print(text)
+        return found
+
+    if not latencies:
+        fleet_report(out, args.latency)
+        return 0
+    text = sweep.run_sweep(out, latencies, fleet_report, policy=args.policy, command=command,
+                           per_robot_goals=engine["per_robot_goals"])
     print(text)
     return 0
