@@ -18,6 +18,10 @@ CONDITIONS = ("drive", "use_stamped_cmd_vel", "command_latency", "velocity_lag",
               "end_on_goals")
 
 
+#: beyond this many episodes the plot numbers them instead of naming each
+MAX_LABELLED = 20
+
+
 def _mean(values: List[Optional[float]]) -> Optional[float]:
     kept = [v for v in values if v is not None]
     return sum(kept) / len(kept) if kept else None
@@ -109,7 +113,10 @@ def plot(rows: List[Dict[str, Any]], per_robot_goals: bool, path, title: str) ->
         values = [[r[key] if r[key] is not None else math.nan for r in rows] for key in (ours, theirs)]
         axis.bar([i - width / 2 for i in x], values[0], width, label="engine")
         axis.bar([i + width / 2 for i in x], values[1], width, label="robot_fleet")
-        axis.set_xticks(x, [r["episode"] for r in rows], rotation=45, ha="right", fontsize=7)
+        if len(rows) <= MAX_LABELLED:
+            axis.set_xticks(x, [r["episode"] for r in rows], rotation=45, ha="right", fontsize=7)
+        else:  # names would overlap: number the episodes in the table's order
+            axis.set_xlabel("episode (the report's rows, in order)")
         axis.set_ylabel(label)
         axis.legend(fontsize=8)
     figure.suptitle(title, fontsize=9)
