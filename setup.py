@@ -22,6 +22,7 @@ setup(
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.json") + glob("config/*.rviz"))),
         (f"share/{PACKAGE}/config/train", sorted(glob("config/train/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.py"))),
+        (f"share/{PACKAGE}/policies", sorted(glob("policies/*.onnx") + glob("policies/*.json"))),
     ],
     # torch is deliberately unpinned here; scripts/setup.sh installs the pinned
     # CPU build first (see docs/install.md).

@@ -17,7 +17,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PKG = "vmas_ros"
-PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "resource", "config", "launch_scripts", PKG]
+PACKAGE_FILES = ["package.xml", "setup.py", "setup.cfg", "resource", "config", "launch_scripts", "policies", PKG]
 REQUIRED_EXEC_DEPENDS = {
     "rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "std_srvs",
     "rosgraph_msgs", "visualization_msgs", "python3-numpy", "python3-pytorch-pip",
@@ -120,6 +120,10 @@ def test_colcon_install_tree(colcon_install):
     assert (prefix / "share" / PKG / "config" / PROBE_CONFIG).is_file()
     assert (prefix / "share" / PKG / "config" / "vmas_ros.rviz").is_file()
     assert (prefix / "share" / PKG / "launch" / PROBE_LAUNCH).is_file()
+    shipped = sorted(p.name for p in (ROOT / "policies").iterdir() if p.suffix in (".onnx", ".json"))
+    assert shipped and sorted(p.name for p in (prefix / "share" / PKG / "policies").iterdir()) == shipped
+    recipes = sorted(p.name for p in (ROOT / "config" / "train").glob("*.yaml"))
+    assert recipes and sorted(p.name for p in (prefix / "share" / PKG / "config" / "train").iterdir()) == recipes
     for exe in EXECUTABLES:
         path = prefix / "lib" / PKG / exe
         assert path.is_file(), f"{path} missing (setup.cfg install_scripts?)"
