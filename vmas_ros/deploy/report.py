@@ -95,12 +95,8 @@ def markdown(rows: List[Dict[str, Any]], summary: Dict[str, Any], per_robot_goal
 
 def plot(rows: List[Dict[str, Any]], per_robot_goals: bool, path, title: str) -> bool:
     """Coverage (and time to done) per episode, engine beside fleet, as a PNG; False without matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return False
     panels = 2 if per_robot_goals else 1
     figure, axes = plt.subplots(1, panels, figsize=(5.5 * panels, 3.6), squeeze=False)
@@ -119,8 +115,27 @@ def plot(rows: List[Dict[str, Any]], per_robot_goals: bool, path, title: str) ->
             axis.set_xlabel("episode (the report's rows, in order)")
         axis.set_ylabel(label)
         axis.legend(fontsize=8)
+    save(figure, title, path)
+    return True
+
+
+def pyplot():
+    """matplotlib's pyplot on the file-only Agg backend; None without matplotlib."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    return plt
+
+
+def save(figure, title: str, path) -> None:
+    """Title, lay out, write and close a figure (the deploy reports' PNGs)."""
+    import matplotlib.pyplot as plt
+
     figure.suptitle(title, fontsize=9)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
-    return True

@@ -15,6 +15,8 @@ import math
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
+from vmas_ros.deploy import report
+
 __all__ = ["KEEP", "parse_latencies", "folder_name", "sweep_rows", "first_below", "run_sweep"]
 
 #: the share of the engine's success rate the fleet must keep (docs/bench/deploy.md)
@@ -93,12 +95,8 @@ def markdown(rows: List[Dict[str, Any]], policy: str, command: str) -> str:
 
 def plot(rows: List[Dict[str, Any]], path: Path, title: str) -> bool:
     """Success and collisions against latency as a PNG; False without matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = report.pyplot()
+    if plt is None:
         return False
     ms = [r["latency"] * 1000 for r in rows]
     figure, (left, right) = plt.subplots(1, 2, figsize=(10, 3.6))
@@ -113,10 +111,7 @@ def plot(rows: List[Dict[str, Any]], path: Path, title: str) -> bool:
     right.axhline(rows[0]["engine_collisions"], color="C1", label="engine")
     right.set(xlabel="command latency (ms)", ylabel="collisions per episode")
     right.legend(fontsize=8)
-    figure.suptitle(title, fontsize=9)
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    report.save(figure, title, path)
     return True
 
 
