@@ -60,7 +60,8 @@ def test_a_shipped_navigation_policy_brings_every_agent_to_its_goal_in_the_engin
     docs/bench/deploy.md measures it over 100 episodes; here 20, from other seeds."""
     policy = OnnxPolicy.load(path)
     recipe = recipe_of(path)
-    seconds = recipe["max_steps"] * 0.1  # navigation's dt
+    dt = vmas_ros.make_env(recipe["scenario"], num_envs=1, **recipe["scenario_kwargs"]).world.dt
+    seconds = recipe["max_steps"] * dt
     done = 0
     for seed in (101, 102):
         part = engine_side.engine_episodes(policy, recipe["scenario"], recipe["scenario_kwargs"], 10, seed, seconds)

@@ -101,9 +101,11 @@ def engine_episodes(policy, scenario: str, kwargs: Dict[str, Any], episodes: int
     records: List[Dict[str, Any]] = []
     for b in kept:
         end = len(track)  # steps of this episode's track that count, start included
-        if per_robot and end_at_done:
-            done = (np.linalg.norm(track[:, b] - goals[b][None], axis=-1) <= goal_radius).all(axis=1)
-            end = int(done.argmax()) + 1 if done.any() else end
+        if per_robot:
+            within_all = np.linalg.norm(track[:, b] - goals[b][None], axis=-1) <= goal_radius  # [T, n]
+            done = within_all.all(axis=1)
+            if end_at_done and done.any():
+                end = int(done.argmax()) + 1
         if end < len(track):
             cut_collisions, cut_separation = contact_onsets(track[:end, b:b + 1], radius)
             onsets, closest, last = int(cut_collisions[0]), cut_separation[0], track[end - 1, b]
@@ -112,13 +114,11 @@ def engine_episodes(policy, scenario: str, kwargs: Dict[str, Any], episodes: int
         record = {"env_index": int(b), "coverage": _coverage(last, goals[b]), "robot_robot": onsets,
                   "min_separation": _plain(closest), "duration": float(times[end - 1])}
         if per_robot:
-            distance = np.linalg.norm(track[:end, b] - goals[b][None], axis=-1)  # [T, n]
-            within = distance <= goal_radius
-            reached = _first_time(within, times[:end])
+            reached = _first_time(within_all[:end], times[:end])
             record.update(time_to_goal=[_plain(t) for t in reached],
                           all_reached_time=None if np.isnan(reached).any() else float(reached.max()),
-                          all_at_goal_time=_plain(_first_time(within.all(axis=1), times[:end])),
-                          final_distance=distance[-1].tolist())
+                          all_at_goal_time=_plain(_first_time(done[:end], times[:end])),
+                          final_distance=np.linalg.norm(track[end - 1, b] - goals[b], axis=-1).tolist())
         records.append(record)
     starts = [{"robots": start_poses[b].tolist(), "goals": goals[b].tolist()} for b in kept]
     return {"dt": dt, "steps": steps, "radius": radius, "goal_radius": goal_radius, "per_robot_goals": per_robot,
