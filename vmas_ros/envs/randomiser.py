@@ -12,10 +12,12 @@ The environment calls it at three points, and only when randomisation is on:
 Everything is batched over agents and envs: per-agent-and-env settings are
 ``[A, B]`` tensors, the command history is one ring buffer ``[D + 1, A, B,
 size]`` (``D``: the longest delay in steps) read with one gather, and the
-noise is drawn for all agents at once. Draws come from a generator of its
-own, seeded from the env's seed: the scenario's random stream is left as it
-would be without randomisation, so the same seed gives the same start states
-with and without it.
+settings drawn at resets come for all agents at once from a generator of
+its own, seeded from the env's seed; the observation noise's numbers are a
+hash of that seed, the noise's step and the element
+(:mod:`~vmas_ros.envs.sensor_noise`), computed inside the noise's kernel.
+The scenario's random stream is left as it would be without randomisation,
+so the same seed gives the same start states with and without it.
 """
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ from typing import Dict, List, Optional
 import torch
 from torch import Tensor
 
+from vmas_ros.envs import sensor_noise
 from vmas_ros.envs.randomisation import HALF_UP, SETTINGS, Randomisation
 from vmas_ros.simulator.compiling import WorldKernel
 
@@ -84,6 +87,11 @@ class Randomiser:
     def seed(self, seed: int) -> None:
         """Start the draws afresh from the env's ``seed`` (a stream of their own, apart from the scenario's)."""
         self.generator.manual_seed(SEED_OFFSET + int(seed))
+        device = self.generator.device
+        # the observation noise's numbers: a hash of (seed, step of the noise, element), see sensor_noise
+        self._seed_key = sensor_noise.hash32(torch.tensor(_as_int32(SEED_OFFSET + int(seed)), dtype=torch.int32,
+                                                          device=device))
+        self._step = torch.zeros((), dtype=torch.int32, device=device)
 
     # ------------------------------------------------------------------- resets
     def draw(self, envs: Optional[Tensor]) -> None:
@@ -165,20 +173,20 @@ class Randomiser:
             self._projection = _projection(layout, shape[2], obs)
             self._perturb = WorldKernel(self._env.world, partial(_perturbed, lidar=None if layout.lidar is None else (
                 layout.lidar.start, layout.lidar.count, float(layout.lidar.max_value), float(layout.lidar.miss))))
-        rays = layout.lidar.count if self._lidar_sigma is not None else 0
-        # every normal error in one draw: 4 per agent and env (position, velocity), then one per lidar ray
-        normal = torch.randn(shape[0], shape[1], 4 + rays, dtype=obs.dtype, device=obs.device, generator=self.generator)
-        bits = None
-        if rays:
-            # 16 random bits per ray for its dropout, four from each 64-bit draw (a uniform float costs one)
-            count = shape[0] * shape[1] * rays
-            words = torch.empty((count + 3) // 4, dtype=torch.int64, device=obs.device).random_(generator=self.generator)
-            bits = words.view(torch.int16)[:count].view(shape[0], shape[1], rays)
-        return self._perturb(obs, normal, bits, self._pair_sigma, self._projection, self._lidar_sigma, self._dropout)
+        noisy = self._perturb(obs, self._seed_key, self._step, self._pair_sigma, self._projection, self._lidar_sigma,
+                              self._dropout)
+        self._step.add_(1)
+        return noisy
 
     def observation_list(self, obs: List[Tensor]) -> List[Tensor]:
         """:meth:`observations` for one ``[B, O]`` tensor per agent."""
         return list(self.observations(torch.stack(obs)).unbind(0))
+
+
+def _as_int32(value: int) -> int:
+    """The int32 whose bits are ``value``'s low 32."""
+    value &= 0xFFFFFFFF
+    return value - (1 << 32) if value >= 1 << 31 else value
 
 
 def _read_rows(delay: Tensor, period: int) -> Tensor:
@@ -200,24 +208,33 @@ def _projection(layout, width: int, like: Tensor) -> Tensor:
     return matrix
 
 
-def _perturbed(obs: Tensor, normal: Tensor, bits: Optional[Tensor], pair_sigma: Tensor, projection: Tensor,
+def _perturbed(obs: Tensor, seed_key: Tensor, step: Tensor, pair_sigma: Tensor, projection: Tensor,
                lidar_sigma: Optional[Tensor], dropout: Optional[Tensor], lidar) -> Tensor:
-    """``obs`` ``[A, B, O]`` as a robot's sensors would give it, from standard normals ``[A, B, 4 + L]`` and
-    16 random bits per lidar ray ``[A, B, L]`` (or None).
+    """``obs`` ``[A, B, O]`` as a robot's sensors would give it, with the random numbers of noise ``step``
+    (0-d int32) of the stream ``seed_key`` (see :mod:`~vmas_ros.envs.sensor_noise`).
 
-    The first four normals, times ``pair_sigma``, are the position and velocity errors, which
-    ``projection`` ``[4, O]`` puts on every column that moves with them. Per lidar ray: a normal error
-    times ``lidar_sigma``, and a dropout with probability ``dropout`` (its bits as a uniform in (0, 1),
-    15 of them: resolution 2^-15). A ray that saw nothing still sees nothing; the others stay in the
-    sensor's range. A pure function of its arguments: it compiles with the world's physics.
+    Four normal errors per agent and env, times ``pair_sigma`` ``[A, B, 4]``, are the position and velocity
+    errors, which ``projection`` ``[4, O]`` puts on every column that moves with them. Per lidar ray: a normal
+    error times ``lidar_sigma`` ``[A, B, 1]``, and a dropout with probability ``dropout`` ``[A, B, 1]``.
+    A ray that saw nothing still sees nothing; the others stay in the sensor's range. A pure function
+    of its arguments: it compiles with the world's physics.
     """
-    noisy = obs + torch.matmul(normal[..., :4] * pair_sigma, projection)
-    if bits is None:
+    n_agents, n_envs, _ = obs.shape
+    rays = 0 if lidar is None else lidar[1]
+    numbers = sensor_noise.hashes(sensor_noise.stream_key(seed_key, step), (n_agents, n_envs, 4 + rays))
+    errors = sensor_noise.normals(numbers[..., :4], obs.dtype) * pair_sigma
+    if torch.compiler.is_compiling():  # four broadcast products fuse with the rest
+        noisy = obs + (errors.unsqueeze(-1) * projection).sum(dim=-2)
+    else:  # one matmul is the cheaper eager call
+        noisy = torch.addmm(obs.reshape(-1, obs.shape[-1]), errors.reshape(-1, 4), projection).view(obs.shape)
+    if lidar_sigma is None:
         return noisy
     start, count, max_value, miss = lidar
-    kept = ((bits & 0x7FFF).to(obs.dtype) + 0.5) / 32768.0 > dropout
+    per_ray = numbers[..., 4:]
+    kept = sensor_noise.uniforms(per_ray, obs.dtype) > dropout
+    ray_errors = sensor_noise.normals(per_ray, obs.dtype)
     readings = obs[..., start:start + count]
-    seen = (readings + lidar_sigma * normal[..., 4:]).clamp(0.0, max_value)
+    seen = (readings + lidar_sigma * ray_errors).clamp(0.0, max_value)
     readings = torch.where((readings != miss) & kept, seen, torch.full_like(readings, miss))
     return torch.cat([noisy[..., :start], readings, noisy[..., start + count:]], dim=-1)
 
