@@ -16,15 +16,10 @@ from torch import Tensor
 
 from vmas_ros.simulator.shapes import Shape, Sphere
 from vmas_ros.simulator.state import Action, AgentState, EntityState, _Batched
+from vmas_ros.simulator.tables import collide_with_all
 from vmas_ros.simulator.utils import Color, Observable
 
 __all__ = ["EntityState", "AgentState", "Action", "Entity", "Landmark", "Agent", "collide_with_all"]
-
-
-def collide_with_all(other: "Entity") -> bool:
-    """The default collision filter: collide with every entity. The step recognises it (by identity)
-    to know that every pair of a group of spheres may touch (see tables.SphereGroup)."""
-    return True
 
 
 def _table_property(name: str, doc: str):

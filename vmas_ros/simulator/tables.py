@@ -21,6 +21,7 @@ from torch import Tensor
 from vmas_ros.simulator.shapes import Box, Line, Sphere
 
 if TYPE_CHECKING:
+    from vmas_ros.simulator.entities import Entity
     from vmas_ros.simulator.physics.constants import StepConstants
     from vmas_ros.simulator.physics.scales import DynamicsScales
 
@@ -216,10 +217,15 @@ def _shape_params(prefix: str, shape) -> Dict[str, float]:
     raise TypeError(f"unsupported shape {shape!r}")
 
 
+def collide_with_all(other: "Entity") -> bool:
+    """The default collision filter: collide with every entity. The step recognises it (by identity)
+    to know that every pair of a group of spheres may touch (see SphereGroup)."""
+    return True
+
+
 def _grid_members(world, entities) -> List[int]:
     """Entities a :class:`SphereGroup` can hold (spheres that collide with everything, movable, in no
     joint), if there are enough of them for the grid to pay off; else none."""
-    from vmas_ros.simulator.entities import collide_with_all
     from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES
 
     minimum = GRID_MIN_SPHERES if world.sphere_grid == "auto" else (0 if world.sphere_grid == "on" else None)

@@ -150,14 +150,25 @@ def extract_nested_with_index(data, index: int):
     raise TypeError(f"extract_nested_with_index: expected a tensor or a dict of them, got {type(data).__name__}")
 
 
+def clamp_norm(vec: Tensor, max_norm) -> Tensor:
+    """Scale vectors longer than ``max_norm`` back onto it (``inf`` means no limit).
+
+    Rounds like VMAS (``vec / norm * max``) so speed-limited agents stay in
+    bit parity, and keeps gradients finite: the unused branch never divides by
+    zero or multiplies by ``inf``.
+    """
+    norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
+    over = norm > max_norm
+    finite_max = torch.where(torch.isfinite(torch.as_tensor(max_norm, device=vec.device)), max_norm, 0.0)
+    return torch.where(over, vec / torch.where(over, norm, 1.0) * finite_max, vec)
+
+
 class TorchUtils:
     """Batched helpers scenarios use; all take and return tensors on the input's device."""
 
     @staticmethod
     def clamp_with_norm(tensor: Tensor, max_norm: Union[float, Tensor]) -> Tensor:
         """Scale vectors whose norm exceeds ``max_norm`` back onto that norm."""
-        from vmas_ros.simulator.physics.forces import clamp_norm
-
         return clamp_norm(tensor, max_norm)
 
     @staticmethod

@@ -16,7 +16,7 @@ from torch import Tensor
 
 from vmas_ros.simulator.action_block import ActionBlock
 from vmas_ros.simulator.layout import split_xy_into, stack_into
-from vmas_ros.simulator.physics.forces import clamp_norm
+from vmas_ros.simulator.utils import clamp_norm
 from vmas_ros.simulator.physics.integrator import differentiable
 from vmas_ros.simulator.thresholds import SMALL_BATCH_ELEMENTS
 from vmas_ros.simulator.tables import WorldTables

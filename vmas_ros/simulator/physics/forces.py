@@ -3,8 +3,8 @@
     f_i = f_action + f_friction + f_gravity   (then + contacts + joints)
 
 Friction is Coulomb-like: it opposes the velocity with at most ``mu * m`` and
-never reverses a velocity within one substep. Also the limit of an agent's
-action force (``clamp_norm``), applied when the actions are assembled.
+never reverses a velocity within one substep. The limit of an agent's action
+force (``utils.clamp_norm``) is applied when the actions are assembled.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from vmas_ros.simulator.masks import mask_ne
 from vmas_ros.simulator.physics.constants import StepConstants
 from vmas_ros.simulator.tables import WorldTables
 
-__all__ = ["applied_forces", "clamp_norm", "friction"]
+__all__ = ["applied_forces", "friction"]
 
 
 def applied_forces(actions: Tensor, v: Tensor, tables: WorldTables, c: StepConstants, may_write_actions: bool) -> Tensor:
@@ -42,16 +42,3 @@ def friction(v: Tensor, c: StepConstants) -> Tensor:
     moving = mask_ne(speed, 0.0)
     inv = moving / (speed + (1 - moving))  # 1 / speed where moving, 0 elsewhere (exact)
     return -(v * inv) * torch.minimum(c.friction_cap, v.abs() * c.mass_over_dt)
-
-
-def clamp_norm(vec: Tensor, max_norm) -> Tensor:
-    """Scale vectors longer than ``max_norm`` back onto it (``inf`` means no limit).
-
-    Rounds like VMAS (``vec / norm * max``) so speed-limited agents stay in
-    bit parity, and keeps gradients finite: the unused branch never divides by
-    zero or multiplies by ``inf``.
-    """
-    norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
-    over = norm > max_norm
-    finite_max = torch.where(torch.isfinite(torch.as_tensor(max_norm, device=vec.device)), max_norm, 0.0)
-    return torch.where(over, vec / torch.where(over, norm, 1.0) * finite_max, vec)
