@@ -7,19 +7,11 @@ goals) in :mod:`~vmas_ros.adapters.pieces`, the shipped adapters in
 :mod:`~vmas_ros.adapters.tasks`. Nothing here imports rclpy or torch when it
 is imported (docs/policy_node.md#observation-adapters).
 """
-from vmas_ros.adapters.base import ObservationAdapter, TopicObservations, load_adapter
+from vmas_ros.adapters.base import ADAPTER_NAMES, ObservationAdapter, TopicObservations, load_adapter
 from vmas_ros.adapters.pieces import (
     ScanResampler, odometry_state, pose_array_positions, pose_position, read_odometry,
 )
 from vmas_ros.adapters.tasks import DiffDriveAdapter, GoalAdapter, NavigationAdapter, SimpleSpreadAdapter
-
-#: short adapter name -> ``package.module:Class`` (each is the scenario of the same name)
-ADAPTER_NAMES = {
-    "diff_drive": "vmas_ros.adapters.tasks:DiffDriveAdapter",
-    "goal": "vmas_ros.adapters.tasks:GoalAdapter",
-    "navigation": "vmas_ros.adapters.tasks:NavigationAdapter",
-    "simple_spread": "vmas_ros.adapters.tasks:SimpleSpreadAdapter",
-}
 
 __all__ = [
     "ADAPTER_NAMES", "DiffDriveAdapter", "GoalAdapter", "NavigationAdapter", "ObservationAdapter", "ScanResampler",

@@ -137,6 +137,15 @@ class TopicObservations(ObservationAdapter):
         return obs
 
 
+#: short adapter name -> ``package.module:Class`` (each is the scenario of the same name)
+ADAPTER_NAMES = {
+    "diff_drive": "vmas_ros.adapters.tasks:DiffDriveAdapter",
+    "goal": "vmas_ros.adapters.tasks:GoalAdapter",
+    "navigation": "vmas_ros.adapters.tasks:NavigationAdapter",
+    "simple_spread": "vmas_ros.adapters.tasks:SimpleSpreadAdapter",
+}
+
+
 def load_adapter(spec: str, agents: Sequence[str], observation_size: int, kwargs: Dict[str, Any],
                  scenario_kwargs: Optional[Mapping[str, Any]] = None) -> ObservationAdapter:
     """The adapter named by ``spec``, constructed: a short name of ``vmas_ros.adapters.ADAPTER_NAMES``
@@ -149,8 +158,6 @@ def load_adapter(spec: str, agents: Sequence[str], observation_size: int, kwargs
     """
     if not spec:
         return TopicObservations(agents, observation_size, **kwargs)
-    from vmas_ros.adapters import ADAPTER_NAMES
-
     path = ADAPTER_NAMES.get(spec, spec)
     module_name, _, class_name = path.partition(":")
     if not module_name or not class_name:
