@@ -207,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_delegated(sub, "play", "drive agents with the keyboard in a pygame window",
                    add_play_arguments, run_play_command)
-    from vmas_ros.bench.mpe import add_bench_arguments, run_bench_command
+    from vmas_ros.bench.cli import add_bench_arguments, run_bench_command
 
     _add_delegated(sub, "bench", "benchmarks (mpe: the VMAS paper's Figure 2, against VMAS and MPE)",
                    add_bench_arguments, run_bench_command)

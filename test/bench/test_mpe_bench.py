@@ -13,7 +13,7 @@ import pytest
 import torch
 from PIL import Image
 
-from vmas_ros.bench.cli import parse_bench_args
+from vmas_ros.bench.cli import parse_bench_args, run_bench_command
 from vmas_ros.bench import mpe as bench
 from vmas_ros.bench.timing import Case, time_alternating, time_callable
 
@@ -137,7 +137,7 @@ def test_threads_are_restored_and_a_missing_peer_is_skipped_with_a_note(monkeypa
 )
 def test_bad_arguments_return_2_with_a_reason(argv, needle, capsys, tmp_path):
     args = parse_bench_args(argv + ["--out", str(tmp_path / "never"), "--no-progress"])
-    assert bench.run_bench_command(args) == 2
+    assert run_bench_command(args) == 2
     assert needle in capsys.readouterr().err
     assert not (tmp_path / "never").exists()
 
@@ -147,7 +147,7 @@ def test_command_runs_prints_the_table_and_writes_files(capsys, tmp_path):
     args = parse_bench_args(["mpe", "--num-envs", "1", "2", "--steps", "2", "--repeats", "1", "--mpe-max-envs", "1",
                    "--threads", "1", "--devices", "cpu", "--out", str(tmp_path), "--no-progress"])
     assert args.bench_num_envs == [1, 2] and args.mpe_max_envs == 1 and args.threads == 1
-    assert bench.run_bench_command(args) == 0
+    assert run_bench_command(args) == 0
     out = capsys.readouterr().out
     assert "| num_envs |" in out and "mpe_benchmark.csv" in out
     for name in ("mpe_benchmark.csv", "mpe_benchmark.json", "mpe_benchmark.png"):

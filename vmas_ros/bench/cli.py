@@ -1,7 +1,8 @@
 """Command-line handling of ``vmas-ros bench``: the options
 (:func:`add_bench_arguments`, :func:`parse_bench_args`) and running them
 (:func:`run_bench_command`).
-Both are re-exported by :mod:`vmas_ros.bench.mpe`.
+It is the top of :mod:`vmas_ros.bench`: it imports the benchmarks, none
+of them imports it.
 """
 from __future__ import annotations
 
@@ -9,11 +10,9 @@ import argparse
 import sys
 
 from vmas_ros.bench.report import plot_available
-from vmas_ros.bench.common import BENCHMARKS, DEFAULT_MODE_WARMUP_MAX_STEPS
+from vmas_ros.bench.common import BENCHMARKS, DEFAULT_MODE_WARMUP_MAX_STEPS, DEFAULT_NUM_ENVS
 
 __all__ = ["add_bench_arguments", "parse_bench_args", "run_bench_command"]
-
-DEFAULT_NUM_ENVS = [1, 10, 100, 1000]  # bench mpe's --num-envs
 
 
 # ---------------------------------------------------------------------- CLI
@@ -161,7 +160,7 @@ def _run_randomisation(args: argparse.Namespace) -> int:
 
 def run_bench_command(args: argparse.Namespace) -> int:
     """Run the benchmark from parsed ``add_bench_arguments`` options: 0 on success, 2 on bad arguments."""
-    # looked up on the module at call time (no import cycle; patches of vmas_ros.bench.mpe apply)
+    # looked up on the module at call time, so patches of vmas_ros.bench.mpe apply
     from vmas_ros.bench import mpe
 
     benchmark = getattr(args, "benchmark", "mpe") or "mpe"

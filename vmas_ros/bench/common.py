@@ -20,6 +20,8 @@ BENCHMARKS = ("mpe", "suite", "node", "process", "jaxmarl", "torchrl", "randomis
 #: The default mode's long run, as the benchmarks time it: a warm-up steps on through the default mode's
 #: switch to the compiled step when that comes within this many steps; a later switch is timed eager
 DEFAULT_MODE_WARMUP_MAX_STEPS = 20_000
+#: bench mpe's default ``--num-envs``; the suite refuses any other value (it takes ``--scale``)
+DEFAULT_NUM_ENVS = [1, 10, 100, 1000]
 
 CSV_COLUMNS = [
     "run_id", "scenario", "side", "device", "num_envs", "steps", "repeats", "median_s", "min_s", "max_s",

@@ -36,7 +36,6 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from vmas_ros.bench.cli import add_bench_arguments, run_bench_command
 from vmas_ros.bench.common import (  # noqa: F401 - re-exported
     _LABEL,
     _PEER_INSTALL,
@@ -75,8 +74,6 @@ __all__ = [
     "machine_info",
     "run_mpe_benchmark",
     "write_results",
-    "add_bench_arguments",
-    "run_bench_command",
 ]
 
 

@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from vmas_ros.bench import mpe as _mpe
-from vmas_ros.bench.common import COMPILED_SIDE
+from vmas_ros.bench.common import COMPILED_SIDE, DEFAULT_NUM_ENVS
 from vmas_ros.bench.report import plot_available
 from vmas_ros.bench.suite_cases import SPHERE_SPACING, SWARM_SPACING
 from vmas_ros.bench.suite_cases import record_timed_mode
@@ -449,8 +449,6 @@ def run_suite(workloads: Optional[Sequence[str]] = None, steps: int = 100, repea
 # --------------------------------------------------------------------- CLI
 def run_suite_command(args) -> int:
     """``vmas-ros bench suite``: 0 when every measured workload ran, 1 if one errored, 2 on bad options."""
-    from vmas_ros.bench.cli import DEFAULT_NUM_ENVS
-
     options = dict(
         workloads=getattr(args, "workloads", None), steps=args.steps, repeats=getattr(args, "repeats", 3),
         warmup=getattr(args, "warmup", 1), scale=getattr(args, "scale", 1.0), threads=getattr(args, "threads", None),
