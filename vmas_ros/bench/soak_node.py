@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from vmas_ros.bench.soak import MB, MemorySample, growth_mb, rss_bytes, slope_per_hour, write_outputs
+from vmas_ros.bench.soak_memory import MB, MemorySample, growth_mb, rss_bytes, slope_per_hour, write_outputs
 
 __all__ = ["NodeSoakResult", "add_node_arguments", "read_bag_counts", "run_node_command", "run_node_soak"]
 
