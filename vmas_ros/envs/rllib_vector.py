@@ -45,10 +45,10 @@ from ray.rllib.env.vector.vector_multi_agent_env import VectorMultiAgentEnv
 from ray.rllib.utils.annotations import override
 from ray.rllib.utils.pre_checks.env import check_multiagent_environments
 
-from vmas_ros.envs import rllib_env
 from vmas_ros.envs import wrapper_common as common
 from vmas_ros.envs.environment import Environment
 from vmas_ros.envs.gymnasium_env import RENDER_MODES
+from vmas_ros.envs.rllib_config import from_config
 
 __all__ = ["BatchedMultiAgentEnvRunner", "RLlibVectorMultiAgentEnv", "VectorEnvWrapper"]
 
@@ -354,12 +354,12 @@ class BatchedMultiAgentEnvRunner(MultiAgentEnvRunner):
             context = EnvContext(context, worker_index=self.worker_index or 0,
                                  num_workers=self.config.num_env_runners, remote=self.config.remote_worker_envs)
         if not self.config.disable_env_checking:
-            probe = rllib_env.from_config(context, compile_physics=False)
+            probe = from_config(context, compile_physics=False)
             try:
                 check_multiagent_environments(probe)
             finally:
                 probe.close()
-        self.env = rllib_env.from_config(context, num_envs=self.config.num_envs_per_env_runner, batched=True)
+        self.env = from_config(context, num_envs=self.config.num_envs_per_env_runner, batched=True)
         self.num_envs = self.env.num_envs
         self._needs_initial_reset = True
         make_callback(
