@@ -21,12 +21,15 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
 from vmas_ros.train.cli import add_config_flags
 from vmas_ros.train.config import ALGORITHM_NAMES, TrainConfig, load_config_file
+from vmas_ros.train.suite_run import (  # noqa: F401 - re-exported
+    DONE_MARKER, SuiteRun, check_same_settings, run_name, train_one,
+)
 
 __all__ = ["add_train_suite_arguments", "run_train_suite_command", "SuiteRun", "plan_runs", "train_one",
            "check_same_settings",
@@ -34,38 +37,10 @@ __all__ = ["add_train_suite_arguments", "run_train_suite_command", "SuiteRun", "
 
 #: the paper's Figure 3 scenarios
 DEFAULT_SCENARIOS = ("transport", "wheel", "balance", "give_way")
-#: written into a run folder once the run is complete (training, final checkpoint, export)
-DONE_MARKER = "suite_done.json"
 #: TrainConfig fields the suite sets per run; they are not flags and not allowed in --config
 _PER_RUN = ("scenario", "algorithm", "seed", "out", "scenario_kwargs")
 #: suite defaults that differ from ``vmas-ros train``: no per-run evaluation or GIF (the curve is the result)
 _SUITE_DEFAULTS = {"eval_episodes": 0, "gif": False}
-#: fields that may differ between a run folder and the requested config without invalidating its curve
-_MAY_DIFFER = ("iterations", "checkpoint_every", "eval_episodes", "gif", "device", "out", "ray_address", "collectors",
-               "collector_cpus", "collector_device")
-
-
-@dataclass
-class SuiteRun:
-    """One (scenario, algorithm, seed) training run and where it lives."""
-
-    scenario: str
-    algorithm: str
-    seed: int
-    config: TrainConfig
-
-    @property
-    def name(self) -> str:
-        return run_name(self.scenario, self.algorithm, self.seed)
-
-    @property
-    def folder(self) -> Path:
-        return Path(self.config.out)
-
-
-def run_name(scenario: str, algorithm: str, seed: int) -> str:
-    """The run's folder name under ``<out>/runs`` (and its key in the report)."""
-    return f"{scenario}_{algorithm}_seed{seed}"
 
 
 # ---------------------------------------------------------------------- CLI
@@ -141,36 +116,6 @@ def plan_runs(args: argparse.Namespace) -> List[SuiteRun]:
                                                 "seed": seed, "out": str(out)}, source="train-suite options")
                 runs.append(SuiteRun(scenario, algorithm, seed, config))
     return runs
-
-
-# -------------------------------------------------------------- one run
-def check_same_settings(run: SuiteRun, stored: Dict[str, Any]) -> None:
-    """Refuse to continue or reuse a folder trained with other settings: its curve would not be this run's."""
-    wanted = run.config.to_dict()
-    for key, value in wanted.items():
-        if key not in _MAY_DIFFER and stored.get(key) != value:
-            raise ValueError(f"{run.folder} was trained with {key}={stored.get(key)!r}, this suite asks for "
-                             f"{value!r}; use another --out (or delete the folder)")
-
-
-def train_one(run: SuiteRun, progress: bool = False, on_iteration=None) -> Dict[str, Any]:
-    """Train (or resume, or skip) one run; returns ``{"status": trained|resumed|skipped, "history": [...]}``."""
-    from vmas_ros.train.checkpoint import CHECKPOINT_NAME, load_checkpoint
-    from vmas_ros.train.trainer import Trainer
-
-    state = load_checkpoint(run.folder) if (run.folder / CHECKPOINT_NAME).is_file() else None
-    if state is not None:
-        check_same_settings(run, state["config"])
-        if (run.folder / DONE_MARKER).is_file() and int(state["iteration"]) >= run.config.iterations:
-            return {"status": "skipped", "history": state["history"][:run.config.iterations]}
-    status = "trained" if state is None else "resumed"
-    start = time.perf_counter()
-    trainer = Trainer(run.config, resume_state=state, progress=progress)
-    trainer.run(on_iteration=on_iteration)
-    (run.folder / DONE_MARKER).write_text(json.dumps({
-        "iterations": trainer.iteration, "frames": trainer.frames, "status": status,
-        "wall_seconds_this_session": round(time.perf_counter() - start, 2)}, indent=2) + "\n")
-    return {"status": status, "history": trainer.history}
 
 
 def _train_on_ray(runs: List[SuiteRun], bar, histories: Dict[str, Any], statuses: Dict[str, str]) -> int:

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from vmas_ros.train.suite import DONE_MARKER, SuiteRun, train_one
+from vmas_ros.train.suite_run import DONE_MARKER, SuiteRun, check_same_settings, train_one
 
 __all__ = ["train_runs_on_ray"]
 
@@ -67,12 +67,11 @@ def train_runs_on_ray(runs: List[SuiteRun], cpus: int,
     """Train ``runs`` as Ray tasks of ``cpus`` CPUs each (Ray must be connected); returns the failures.
 
     ``on_done(run, result)`` is called as each run finishes, in finishing order;
-    ``result`` has ``status`` and ``history`` like :func:`~vmas_ros.train.suite.train_one`'s.
+    ``result`` has ``status`` and ``history`` like :func:`~vmas_ros.train.suite_run.train_one`'s.
     """
     import ray
 
     from vmas_ros.train.checkpoint import CHECKPOINT_NAME, load_checkpoint
-    from vmas_ros.train.suite import check_same_settings
 
     task = ray.remote(num_cpus=cpus, max_retries=0, scheduling_strategy="SPREAD")(_train_in_scratch)
     pending: Dict[Any, SuiteRun] = {}
