@@ -91,9 +91,9 @@ def test_two_namespaced_nodes_share_one_clock_and_keep_commands_apart(ros, sim_l
 @pytest.mark.parametrize("value, refused", [("auto", False), ("", False), ("robot_a/", False), ("a/b_2/", False),
                                             ("/robot_a/", True), ("robot a/", True), ("a//b", True)])
 def test_frame_prefix_values(value, refused):
-    from vmas_ros.ros.params import _frame_prefix
+    from vmas_ros.rostools.graph import frame_prefix_error
 
-    message = _frame_prefix(value, None)
+    message = frame_prefix_error(value)
     assert (message is not None) == refused
     if refused:
         assert repr(value) in message and "'robot_a/'" in message

@@ -16,6 +16,7 @@ import yaml
 from vmas_ros.simulator.thresholds import DEFAULT_COMPILE_MAX_ENVS
 from vmas_ros.ros.param_table import Param, ParamTable
 from vmas_ros.ros.policy_commands import ACTION_KINDS, BASES
+from vmas_ros.rostools.graph import frame_prefix_error
 
 CONTROL_MODES = ("zero", "heuristic", "policy")
 RECORD_ON_ERROR = ("continue", "stop")
@@ -74,15 +75,6 @@ def _device(value: str, current) -> Optional[str]:
 
 def _not_empty(name: str, why: str = ""):
     return lambda value, current: None if value else f"{name} must not be empty{why}"
-
-
-def _frame_prefix(value: str, current) -> Optional[str]:
-    if value == "auto" or value == "":
-        return None
-    if value.startswith("/") or not all(c.isalnum() or c in "_/" for c in value) or "//" in value:
-        return (f"frame_prefix {value!r} is not a frame name prefix: expected 'auto', '' or letters, digits, "
-                f"'_' and '/' not starting with '/', e.g. 'robot_a/'")
-    return None
 
 
 def _lidar_angle_max(value: float, current) -> Optional[str]:
@@ -194,7 +186,7 @@ SIM_PARAMS = ParamTable("sim_node", [
           minimum=0.0, maximum=MAX_UNPACED_BATCH_MS, note="(0: one step per executor round)"),
     Param("frame_id", "world", "world frame of poses, odometry and markers", check=_not_empty("frame_id")),
     Param("frame_prefix", "auto", "put before every frame name (world and <agent>/base_link); "
-          "auto: the node's namespace, e.g. 'swarm_a/' under /swarm_a, nothing at the root", check=_frame_prefix),
+          "auto: the node's namespace, e.g. 'swarm_a/' under /swarm_a, nothing at the root", check=lambda value, current: frame_prefix_error(value)),
     Param("publish_clock", True, "publish /clock; false when another node of the graph owns the clock "
           "(a recording keeps this node's own)"),
     Param("add_lidar", True, "give every agent without a lidar one, so ROS consumers always get scans"),

@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Callable, Dict, Iterator, Optional, Set, TypeVar
 
-__all__ = ["ToolError", "ToolNode", "call_service", "resolve_name", "service_type", "tool_node"]
+__all__ = ["ToolError", "ToolNode", "call_service", "frame_prefix_error", "resolve_name", "service_type", "tool_node"]
 
 T = TypeVar("T")
 
@@ -45,6 +45,22 @@ def resolve_name(name: str, namespace: str = "/") -> str:
         return "/" + name.strip("/")
     base = "/" + namespace.strip("/")
     return (base.rstrip("/") + "/" + name.strip("/")) if base != "/" else "/" + name.strip("/")
+
+
+def frame_prefix_error(value: str) -> Optional[str]:
+    """Why ``value`` is not a frame name prefix (sim_node's ``frame_prefix``), or None when it is.
+
+    ``auto`` and ``''`` are accepted; otherwise letters, digits, ``_`` and ``/``
+    not starting with ``/`` and without ``//`` (e.g. ``robot_a/``). Shared by
+    the node's parameter check and ``vmas-ros foxglove-layout``, so both refuse
+    the same values with the same words.
+    """
+    if value == "auto" or value == "":
+        return None
+    if value.startswith("/") or not all(c.isalnum() or c in "_/" for c in value) or "//" in value:
+        return (f"frame_prefix {value!r} is not a frame name prefix: expected 'auto', '' or letters, digits, "
+                f"'_' and '/' not starting with '/', e.g. 'robot_a/'")
+    return None
 
 
 class ToolNode:

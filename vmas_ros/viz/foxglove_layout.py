@@ -145,10 +145,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from vmas_ros.ros.params import _frame_prefix
+    from vmas_ros.rostools.graph import frame_prefix_error
 
     try:
-        refused = _frame_prefix(args.frame_prefix, None)  # the node's own rule for its frame_prefix
+        refused = frame_prefix_error(args.frame_prefix)  # the node's own rule for its frame_prefix
         if refused:
             raise ValueError(refused)
         text = layout_json(foxglove_layout(args.frame_prefix + args.frame_id, parse_agents(args.agents)))
