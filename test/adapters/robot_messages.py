@@ -15,6 +15,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import LaserScan
 
 from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.simulator.core import Agent
 from vmas_ros.simulator.sensors import Lidar
 
@@ -23,7 +24,7 @@ SCAN_RAYS, SCAN_RANGE = 360, 3.5
 
 def names(env) -> List[str]:
     """The agents' ROS names, as sim_node and policy_node give them."""
-    return convert.unique_names([a.name for a in env.agents])
+    return env_snapshot.unique_names([a.name for a in env.agents])
 
 
 def odometry(agent, index: int, yaw: Optional[float] = None) -> Odometry:
@@ -78,7 +79,7 @@ def dense_scan(env, agent, index: int, world_offset: float = 0.0) -> LaserScan:
     increment = 2 * math.pi / SCAN_RAYS
     msg = LaserScan()
     msg.header.frame_id = f"{agent.name}/base_link"
-    geometry = convert.ScanGeometry(-math.pi, -math.pi + (SCAN_RAYS - 1) * increment, increment, SCAN_RANGE)
+    geometry = env_snapshot.ScanGeometry(-math.pi, -math.pi + (SCAN_RAYS - 1) * increment, increment, SCAN_RANGE)
     convert.fill_scan(msg, geometry, ranges)
     return msg
 

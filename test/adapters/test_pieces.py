@@ -15,6 +15,7 @@ from vmas_ros.adapters.pieces import (
     ScanResampler, odometry_state, pose_array_positions, pose_position, read_odometry,
 )
 from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 
 DEGREE = 2 * math.pi / 360
 
@@ -59,7 +60,7 @@ def test_odometry_with_unusable_values_is_refused(field, value, problem):
 
 def test_odometry_yaw_ignores_the_quaternion_length():
     odom = Odometry()
-    q = convert.yaw_to_quaternion(-2.5)
+    q = env_snapshot.yaw_to_quaternion(-2.5)
     odom.pose.pose.orientation.x, odom.pose.pose.orientation.y = q[0] * 3, q[1] * 3
     odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = q[2] * 3, q[3] * 3
     assert read_odometry(odom)[0][2] == pytest.approx(-2.5)

@@ -30,6 +30,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 import vmas_ros
 from vmas_ros.record import McapRecorder
 from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.cdr import padding_ranges, serialize_zeroed
 from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.publish import StateMessages
@@ -115,14 +116,15 @@ def test_a_layout_that_does_not_fit_the_bytes_is_refused():
 def _state_messages(env) -> StateMessages:
     """sim_node's pre-serialised state messages of ``env`` (as SimNode._build_io makes them)."""
     world = env.world
-    lidars = convert.agent_lidars(world)
+    lidars = env_snapshot.agent_lidars(world)
     markers = MarkerArray()
     for k, entity in enumerate(world.entities):
         marker = Marker()
         convert.shape_marker(marker, entity, k, "world")
         markers.markers.append(marker)
-    return StateMessages(convert.unique_names([a.name for a in world.agents]), len(world.landmarks),
-                         len(world.entities), {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()},
+    geometry = {i: [env_snapshot.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
+    return StateMessages(env_snapshot.unique_names([a.name for a in world.agents]), len(world.landmarks),
+                         len(world.entities), geometry,
                          {i: [s.n_rays for s in ls] for i, ls in lidars.items()}, "world", markers)
 
 
@@ -133,7 +135,7 @@ def test_state_messages_are_byte_identical_and_zero_padded(scenario, kwargs):
     for agent in env.world.agents:
         agent.add_sensor(Lidar(env.world, n_rays=12, max_range=2.0,
                                entity_filter=lambda e, me=agent: e.collides(me) and me.collides(e)))
-    snap = convert.Snapshot.take(env.world, 1, convert.agent_lidars(env.world))
+    snap = env_snapshot.Snapshot.take(env.world, 1, env_snapshot.agent_lidars(env.world))
     arenas = []
     for fill in (0xA5, 0x5A):
         dirty_heap(fill)

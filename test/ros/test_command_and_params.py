@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.command import command_to_action
 from vmas_ros.ros.params import SimParams, validate
 from vmas_ros.simulator.core import Agent, Sphere, World
@@ -81,7 +82,7 @@ def test_laser_scan_geometry_and_no_return_is_inf():
         angles = torch.linspace(0, 2 * math.pi, 13)[:12].unsqueeze(0)
         max_range = 2.0
 
-    geometry = convert.ScanGeometry.of(FakeLidar())
+    geometry = env_snapshot.ScanGeometry.of(FakeLidar())
     count = round((geometry.angle_max - geometry.angle_min) / geometry.angle_increment) + 1
     assert count == 12
     from sensor_msgs.msg import LaserScan
@@ -105,7 +106,7 @@ def test_odometry_twist_is_in_the_body_frame():
 
 
 def test_names_are_valid_ros_tokens_and_unique():
-    assert convert.unique_names(["agent 0", "agent_0", "1st", "a-b"]) == ["agent_0", "agent_0_1", "n1st", "a_b"]
+    assert env_snapshot.unique_names(["agent 0", "agent_0", "1st", "a-b"]) == ["agent_0", "agent_0_1", "n1st", "a_b"]
 
 
 @pytest.mark.parametrize(

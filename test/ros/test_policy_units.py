@@ -19,6 +19,7 @@ import vmas_ros
 from test.ros.policy_files import constant_push, seek_landmark, write_policy
 from vmas_ros.policy import OnnxPolicy
 from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.adapters import SimpleSpreadAdapter, TopicObservations, load_adapter, odometry_state
 from vmas_ros.ros.params import PolicyNodeParams, validate, validate_policy_node
 from vmas_ros.ros.policy_io import action_bounds, check_policy, policy_actions
@@ -26,7 +27,7 @@ from vmas_ros.ros.policy_io import action_bounds, check_policy, policy_actions
 
 def spread_messages(env, index: int, yaws=None):
     """What sim_node publishes for env ``index``: each agent's Odometry and the landmarks' PoseArray."""
-    names = convert.unique_names([a.name for a in env.agents])
+    names = env_snapshot.unique_names([a.name for a in env.agents])
     latest = {}
     for k, (name, agent) in enumerate(zip(names, env.agents)):
         odom = Odometry()

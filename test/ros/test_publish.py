@@ -1,4 +1,4 @@
-"""sim_node's bulk output (publish.py, convert.PublishedEnv) against the straightforward conversion.
+"""sim_node's bulk output (publish.py, env_snapshot.PublishedEnv) against the straightforward conversion.
 
 The node publishes pre-serialised bytes filled in bulk, from the engine's
 snapshot of the published env. Both must be invisible to consumers: for random
@@ -27,6 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 import vmas_ros
 from vmas_ros.ros import convert, sim_setup
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.params import SimParams
 from test.simulator.lidar_setup import randomise, with_lidars
 from vmas_ros.ros.publish import StateMessages
@@ -78,7 +79,7 @@ def _reference(world, names: List[str], geometry, snap, stamp_ns: int, frame: st
     markers = _markers(world, frame)
     for k, marker in enumerate(markers.markers):
         if isinstance(world.entities[k].color, torch.Tensor):
-            marker.color.r, marker.color.g, marker.color.b = convert.rgb(world.entities[k].color, env_index)
+            marker.color.r, marker.color.g, marker.color.b = env_snapshot.rgb(world.entities[k].color, env_index)
         marker.header.stamp = stamp
         convert.set_pose(marker.pose, snap.pos[k, 0], snap.pos[k, 1], snap.rot[k])
     out["/world/markers"] = serialize_message(markers)
@@ -100,7 +101,7 @@ def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays, 
     env = vmas_ros.make_env(scenario, num_envs=3, seed=1, **kwargs)
     with_lidars(env, rays)
     world = env.world
-    names = convert.unique_names([a.name for a in world.agents])
+    names = env_snapshot.unique_names([a.name for a in world.agents])
     params = SimParams(**ROBOT_LIDAR) if robot else SimParams(add_lidar=False)
     own = sim_setup.add_node_lidars(world, params)
     lidars = sim_setup.published_lidars(world, own)
@@ -122,8 +123,8 @@ def test_bulk_messages_equal_the_per_message_conversion(scenario, kwargs, rays, 
         randomise(env, rng)
         env_index = trial % env.num_envs
         stamp_ns = random.Random(trial).randrange(0, 2**31 * 10**9)
-        snap = convert.Snapshot.take(world, env_index, lidars)
-        colours = [c for k in per_env for c in convert.rgb(world.entities[k].color, env_index)] if per_env else None
+        snap = env_snapshot.Snapshot.take(world, env_index, lidars)
+        colours = [c for k in per_env for c in env_snapshot.rgb(world.entities[k].color, env_index)] if per_env else None
         messages.fill(snap, stamp_ns, colours)
         expected = _reference(world, names, geometry, snap, stamp_ns, frame, env_index, goals)
         assert sorted(expected) == sorted("/" + t.lstrip("/") for t in messages.topics)
@@ -145,11 +146,11 @@ def test_bulk_payloads_deserialise_to_the_state():
     env = vmas_ros.make_env("simple_spread", num_envs=1, seed=3, n_agents=2)
     with_lidars(env)
     world = env.world
-    lidars = convert.agent_lidars(world)
-    geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
+    lidars = env_snapshot.agent_lidars(world)
+    geometry = {i: [env_snapshot.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
     messages = StateMessages(["a", "b"], len(world.landmarks), len(world.entities), geometry,
                              {i: [12] for i in lidars}, "world", _markers(world, "world"))
-    snap = convert.Snapshot.take(world, 0, lidars)
+    snap = env_snapshot.Snapshot.take(world, 0, lidars)
     messages.fill(snap, 12_500_000_000, None)
     odom = deserialize_message(messages.payload(messages.topics.index("b/odom")), Odometry)
     k = len(world.landmarks) + 1
@@ -167,8 +168,8 @@ def test_the_published_env_is_the_gathered_snapshot_and_reuses_the_scenarios_rea
     env = vmas_ros.make_env("flocking", num_envs=3, seed=0)
     with_lidars(env, (6,))  # node lidars, which the scenario never reads
     world = env.world
-    lidars = convert.agent_lidars(world)
-    published = convert.PublishedEnv(world, lidars)
+    lidars = env_snapshot.agent_lidars(world)
+    published = env_snapshot.PublishedEnv(world, lidars)
     assert not published.source.rides_along
     scenario_lidars = [s for ls in lidars.values() for s in ls if s.n_rays == 12]
     node_lidars = [s for ls in lidars.values() for s in ls if s.n_rays == 6]

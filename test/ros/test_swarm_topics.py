@@ -24,7 +24,7 @@ from sensor_msgs.msg import PointCloud2
 import vmas_ros
 from test.ros.test_publish import _markers
 from test.simulator.lidar_setup import randomise, with_lidars
-from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.params import PER_AGENT_TOPICS_MAX_AGENTS, SimParams, validate
 from vmas_ros.ros.publish import StateMessages
 from test.foxglove_client import FoxClient
@@ -47,9 +47,9 @@ def test_the_cloud_holds_every_rays_hit_in_the_world_frame():
     env = vmas_ros.make_env("simple_spread", num_envs=2, seed=4, n_agents=5)
     with_lidars(env, (12, 7), max_range=1.5)
     world = env.world
-    names = convert.unique_names([a.name for a in world.agents])
-    lidars = convert.agent_lidars(world)
-    geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
+    names = env_snapshot.unique_names([a.name for a in world.agents])
+    lidars = env_snapshot.agent_lidars(world)
+    geometry = {i: [env_snapshot.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
     messages = StateMessages(names, len(world.landmarks), len(world.entities), geometry,
                              {i: [s.n_rays for s in ls] for i, ls in lidars.items()}, "map", _markers(world, "map"),
                              per_agent=False, cloud=True)
@@ -60,7 +60,7 @@ def test_the_cloud_holds_every_rays_hit_in_the_world_frame():
     for trial in range(4):
         randomise(env, rng)
         env_index = trial % 2
-        snap = convert.Snapshot.take(world, env_index, lidars)
+        snap = env_snapshot.Snapshot.take(world, env_index, lidars)
         messages.fill(snap, 1_000_000_000 * trial, None)
         cloud = deserialize_message(messages.payload(messages.topics.index("lidar/points")), PointCloud2)
         assert cloud.header.frame_id == "map" and cloud.header.stamp.sec == trial

@@ -24,7 +24,7 @@ pytest.importorskip("foxglove")
 import websockets  # noqa: E402  (test extra: a real Foxglove WebSocket client)
 
 import vmas_ros  # noqa: E402
-from vmas_ros.ros import convert  # noqa: E402
+from vmas_ros.simulator import env_snapshot  # noqa: E402
 from vmas_ros.simulator.sensors import Lidar  # noqa: E402
 from test.foxglove_client import SUBPROTOCOL, WAIT, FoxClient, twist_json  # noqa: E402
 from test.viz.protobuf_decode import decode, schema_descriptors  # noqa: E402
@@ -53,10 +53,10 @@ def sim():
     for agent, xy in zip(world.agents, [(0.0, 0.0), (0.5, 0.0), (-0.6, 0.6)]):
         agent.set_pos(torch.tensor(xy, dtype=torch.float32), batch_index=0)
         agent.set_rot(torch.tensor([0.3], dtype=torch.float32), batch_index=0)
-    names = convert.unique_names([a.name for a in world.agents])
-    lidars = convert.agent_lidars(world)
-    geometry = {i: [convert.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
-    snap = convert.Snapshot.take(world, 0, lidars)
+    names = env_snapshot.unique_names([a.name for a in world.agents])
+    lidars = env_snapshot.agent_lidars(world)
+    geometry = {i: [env_snapshot.ScanGeometry.of(s) for s in ls] for i, ls in lidars.items()}
+    snap = env_snapshot.Snapshot.take(world, 0, lidars)
     assert np.isfinite(snap.scans[0][0]).all() and (snap.scans[0][0] < LIDAR_RANGE).any()
     assert (snap.scans[0][0] >= LIDAR_RANGE).any()  # both hits and no-returns to check
     return dict(world=world, names=names, geometry=geometry, snap=snap)
@@ -181,7 +181,7 @@ def test_subscribed_channels_receive_decodable_messages(bridge, sim):
     log_time, scene = decoded["/scene"]
     entities = scene["entities"]
     assert len(entities) == len(world.entities)
-    assert [e["id"] for e in entities] == convert.unique_names([e.name for e in world.entities])
+    assert [e["id"] for e in entities] == env_snapshot.unique_names([e.name for e in world.entities])
     for k, (entity, msg) in enumerate(zip(world.entities, entities)):
         assert msg["frame_id"] == "world"
         stamp = msg["timestamp"]
@@ -191,7 +191,7 @@ def test_subscribed_channels_receive_decodable_messages(bridge, sim):
         assert size["x"] == pytest.approx(2 * entity.shape.radius) and size["y"] == size["x"]
         assert 0 < size["z"] < size["x"]
         assert cylinder["bottom_scale"] == cylinder["top_scale"] == 1.0
-        rgb = convert.rgb(entity.color)
+        rgb = env_snapshot.rgb(entity.color)
         assert [cylinder["color"].get(c, 0.0) for c in "rgb"] == pytest.approx(rgb)
         assert cylinder["color"]["a"] > 0
         position = cylinder["pose"]["position"]
@@ -239,7 +239,7 @@ def test_hidden_entities_are_deleted_from_the_scene(bridge, sim):
         _, scene = collect(bridge, sim, ["/scene"], which=0)["/scene"]
     finally:
         hidden.reset_render()
-    hidden_id = convert.ros_name(hidden.name)
+    hidden_id = env_snapshot.ros_name(hidden.name)
     assert [d["id"] for d in scene["deletions"]] == [hidden_id]
     assert len(scene["entities"]) == len(world.entities) - 1
     assert hidden_id not in {e["id"] for e in scene["entities"]}

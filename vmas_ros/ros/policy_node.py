@@ -37,7 +37,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from vmas_ros.adapters import load_adapter
-from vmas_ros.ros.convert import unique_names
+from vmas_ros.simulator.env_snapshot import unique_names
 from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.params import POLICY_PARAMS, PolicyNodeParams, run_checked
 from vmas_ros.ros.policy_commands import CommandLimiter, body_commands, needs_heading, resolve_action_kind

@@ -31,6 +31,7 @@ from vmas_ros.ros import convert
 from vmas_ros.ros.cdr import serialize_zeroed
 from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.topic_audit import quiet_publisher_events
+from vmas_ros.simulator import env_snapshot
 
 
 def _resolve(message, path: str) -> Tuple[object, str]:
@@ -58,7 +59,7 @@ class _Template:
 class StateMessages:
     """Poses, odometry, scans, pose arrays, markers and /clock of one env, as CDR bytes per step.
 
-    ``fill(snap, stamp_ns, colours)`` rewrites the arena from a ``convert.Snapshot``;
+    ``fill(snap, stamp_ns, colours)`` rewrites the arena from an ``env_snapshot.Snapshot``;
     ``payloads()`` then yields ``(topic, type name, bytes)`` per message in a fixed
     order. Values go in as ``convert`` computes them (float32 arithmetic where it
     uses float32, ``math`` for trigonometry), so the bytes equal the per-field path.
@@ -71,7 +72,7 @@ class StateMessages:
     """
 
     def __init__(self, agent_names: Sequence[str], n_landmarks: int, n_entities: int,
-                 scan_geometry: Dict[int, List[convert.ScanGeometry]], scan_rays: Dict[int, List[int]],
+                 scan_geometry: Dict[int, List[env_snapshot.ScanGeometry]], scan_rays: Dict[int, List[int]],
                  frame_id: str, markers, per_agent: bool = True, cloud: bool = False,
                  frame_prefix: str = "", goals: Optional[Dict[int, int]] = None) -> None:
         from geometry_msgs.msg import Pose, PoseArray, PoseStamped
@@ -254,7 +255,7 @@ class StateMessages:
         self._pending: Optional[tuple] = None  # (snapshot, stamp, colours) of a fill not yet written
 
     # -------------------------------------------------------------------- step
-    def values(self, snap: convert.Snapshot) -> np.ndarray:
+    def values(self, snap: env_snapshot.Snapshot) -> np.ndarray:
         """The float64 values of a step: per entity (x, y, qz, qw), then per agent its body-frame twist.
 
         Computed exactly as ``convert.set_pose``/``fill_odometry`` do: ``math`` trigonometry on the
@@ -279,7 +280,7 @@ class StateMessages:
         twist[:, 2] = snap.ang_vel[agents]
         return out
 
-    def ranges(self, snap: convert.Snapshot) -> np.ndarray:
+    def ranges(self, snap: env_snapshot.Snapshot) -> np.ndarray:
         """Every scan's ranges in publishing order, float32, as ``convert.fill_scan`` writes them (REP 117):
         +inf where nothing was hit, -inf closer than a lidar's ``range_min``."""
         if not self.scan_order:
@@ -297,7 +298,7 @@ class StateMessages:
             out = np.where(ranges < self._scan_min, np.float32(-np.inf), out)
         return out.astype(np.float32)
 
-    def points(self, snap: convert.Snapshot, ranges: np.ndarray) -> np.ndarray:
+    def points(self, snap: env_snapshot.Snapshot, ranges: np.ndarray) -> np.ndarray:
         """``[R, 3]`` float32: where each ray hit, in the world frame (z 0); NaN for a ray that hit nothing
         (``ranges`` +inf) or something closer than its lidar's ``range_min`` (-inf)."""
         k = self._ray_entity
@@ -309,7 +310,7 @@ class StateMessages:
         out[:, 2] = np.where(np.isfinite(hit), 0.0, np.nan)
         return out
 
-    def fill(self, snap: convert.Snapshot, stamp_ns: int, colours: Optional[np.ndarray] = None) -> None:
+    def fill(self, snap: env_snapshot.Snapshot, stamp_ns: int, colours: Optional[np.ndarray] = None) -> None:
         """Make one step the messages' content. The arena is written (four scatters, whatever the number of
         agents) when the bytes are first asked for: a step nobody subscribes to or records costs nothing."""
         self._pending = (snap, stamp_ns, colours)
@@ -322,7 +323,7 @@ class StateMessages:
             self._pending = None
         return self._bytes
 
-    def _write(self, snap: convert.Snapshot, stamp_ns: int, colours: Optional[np.ndarray]) -> None:
+    def _write(self, snap: env_snapshot.Snapshot, stamp_ns: int, colours: Optional[np.ndarray]) -> None:
         arena = self.arena
         arena[self._idx64] = self.values(snap)[self._src64].astype("<f8").view(np.uint8).reshape(-1, 8)
         if self._idx_ranges.size or self._idx_points.size:

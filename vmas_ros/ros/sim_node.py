@@ -15,7 +15,7 @@ services   ~/reset (Trigger), ~/pause (SetBool), ~/step (Trigger).
 All stamps are simulation time, which advances by the world's dt per step.
 No physics lives here: this file converts tensors to messages and back. The
 engine hands over the published env after each step as one host vector
-(simulator/env_snapshot.py, read through convert.PublishedEnv), the per-step
+(simulator/env_snapshot.py, read through env_snapshot.PublishedEnv), the per-step
 state topics are filled in bulk as pre-serialised bytes (publish.py), and
 unpaced (real_time_factor 0) the node runs several steps per timer callback.
 """
@@ -37,6 +37,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 import vmas_ros
 from vmas_ros.ros import convert, sim_setup
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.command import CommandGate, command_to_action
 from vmas_ros.ros.lifecycle import ConfigError, RecordingStopped
 from vmas_ros.ros.message_types import type_name
@@ -141,7 +142,7 @@ class SimNode(StepLoop, Node):
         self._compile_physics(world, device)
         self.lidars = sim_setup.published_lidars(world, self.own_lidars)
         # how the published env is taken after each step is the engine's choice, made here once
-        self.snapshot = convert.PublishedEnv(world, self.lidars)
+        self.snapshot = env_snapshot.PublishedEnv(world, self.lidars)
 
     def _compile_physics(self, world, device) -> None:
         """The step and its LIDAR casts through torch.compile, as ``compile_physics`` says: ``auto`` (where the
@@ -172,7 +173,7 @@ class SimNode(StepLoop, Node):
 
     def _build_io(self) -> None:
         world = self.env.world
-        self.agent_names = convert.unique_names([a.name for a in world.agents])
+        self.agent_names = env_snapshot.unique_names([a.name for a in world.agents])
         self.scan_geometry = sim_setup.scan_geometry(self.lidars, self.own_lidars, self.params.lidar_range_min)
         self.frame_prefix = self._frame_prefix()
         frame = self.world_frame = self.frame_prefix + self.params.frame_id
@@ -411,7 +412,7 @@ class SimNode(StepLoop, Node):
             tf.child_frame_id = f"{self.frame_prefix}{name}/base_link"
             tf.transform.translation.x, tf.transform.translation.y = float(x), float(y)
             r = tf.transform.rotation
-            r.x, r.y, r.z, r.w = convert.yaw_to_quaternion(float(yaw))
+            r.x, r.y, r.z, r.w = env_snapshot.yaw_to_quaternion(float(yaw))
             transforms.append(tf)
         if transforms and self.tf_pub is not None:
             self._send(self.tf_pub, TFMessage(transforms=transforms))

@@ -7,7 +7,7 @@ the scenario a policy was trained on.
   the node's lidar has the configured geometry (``lidar_rays``,
   ``lidar_angle_min``/``max``, ``lidar_range``) and is published first, as
   ``<agent>/scan``; the scenario's follow as ``scan_1``, ... Its
-  ``lidar_range_min`` goes into its :class:`~vmas_ros.ros.convert.ScanGeometry`.
+  ``lidar_range_min`` goes into its :class:`~vmas_ros.simulator.env_snapshot.ScanGeometry`.
 * **Goals.** An agent whose ``goal`` attribute is an entity of the world
   (navigation, give_way, passage) has that goal published as
   ``<agent>/goal``; a scenario with one agent and a ``goal`` entity that no
@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 from typing import Any, Dict, List, Mapping
 
-from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.lifecycle import ConfigError
 from vmas_ros.ros.params import SIM_PARAMS, validate
 from vmas_ros.simulator.sensors import CollidesWith, Lidar
@@ -49,16 +49,16 @@ def add_node_lidars(world, params) -> Dict[int, Lidar]:
 def published_lidars(world, own: Mapping[int, Lidar]) -> Dict[int, List[Lidar]]:
     """Agent index -> its lidars in publishing order: the node's own first (``<agent>/scan``), then the
     scenario's (``scan_1``, ...)."""
-    lidars = convert.agent_lidars(world)
+    lidars = env_snapshot.agent_lidars(world)
     for i, lidar in own.items():
         lidars[i] = [lidar] + [s for s in lidars[i] if s is not lidar]
     return lidars
 
 
 def scan_geometry(lidars: Mapping[int, List[Lidar]], own: Mapping[int, Lidar],
-                  range_min: float) -> Dict[int, List[convert.ScanGeometry]]:
+                  range_min: float) -> Dict[int, List[env_snapshot.ScanGeometry]]:
     """The LaserScan geometry of every published lidar; ``range_min`` is the node's own lidars' only."""
-    return {i: [convert.ScanGeometry.of(s, range_min if own.get(i) is s else 0.0) for s in sensors]
+    return {i: [env_snapshot.ScanGeometry.of(s, range_min if own.get(i) is s else 0.0) for s in sensors]
             for i, sensors in lidars.items()}
 
 

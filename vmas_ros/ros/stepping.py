@@ -21,7 +21,7 @@ from typing import List, Optional
 import numpy as np
 import torch
 
-from vmas_ros.ros import convert
+from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.lifecycle import SimulationFault
 
 #: unpaced: at most this many steps are computed back to back before their messages go out
@@ -33,7 +33,7 @@ class ComputedStep:
     """What one step publishes: its number, the snapshot of the published env and the observations/rewards."""
 
     steps: int
-    snap: convert.Snapshot
+    snap: env_snapshot.Snapshot
     obs: list
     rewards: Optional[list]
     colours: Optional[list]
@@ -165,7 +165,7 @@ class StepLoop:
         self._check_finite(snap)
         colours = None
         if self._per_env_colours:  # e.g. goal colours drawn per env at reset
-            colours = [c for k in self._per_env_colours for c in convert.rgb(world.entities[k].color, p.env_index)]
+            colours = [c for k in self._per_env_colours for c in env_snapshot.rgb(world.entities[k].color, p.env_index)]
         if phases is not None:
             phases.add("convert", start)
         return ComputedStep(self.steps, snap, self.obs, self.rewards, colours)
@@ -210,7 +210,7 @@ class StepLoop:
             phases.add("publish", start)
             phases.steps += 1
 
-    def _check_finite(self, snap: convert.Snapshot) -> None:
+    def _check_finite(self, snap: env_snapshot.Snapshot) -> None:
         """Refuse (SimulationFault) a NaN/inf pose or velocity, or a NaN scan, before any is published."""
         if snap.all_finite():
             return

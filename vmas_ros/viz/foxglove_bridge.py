@@ -3,7 +3,7 @@
 ``FoxgloveBridge`` runs a foxglove-sdk WebSocket server (subprotocol
 ``foxglove.sdk.v1``; open ``ws://127.0.0.1:<port>`` in the Foxglove app) and
 turns the per-env host snapshot that ``sim_node`` already takes
-(:class:`vmas_ros.ros.convert.Snapshot`) into Foxglove's own schemas:
+(:class:`vmas_ros.simulator.env_snapshot.Snapshot`) into Foxglove's own schemas:
 
 ==========================  ============================  =========================
 topic                       schema                        frame
@@ -90,7 +90,7 @@ except ImportError as _error:  # pragma: no cover - depends on the installation
         "vmas_ros.viz.foxglove_bridge needs foxglove-sdk: pip install 'vmas_ros[foxglove]'"
     ) from _error
 
-from vmas_ros.ros.convert import ScanGeometry, Snapshot, unique_names, yaw_to_quaternion
+from vmas_ros.simulator.env_snapshot import ScanGeometry, Snapshot, unique_names, yaw_to_quaternion
 from vmas_ros.viz.foxglove_logs import SUBPROTOCOL  # importing it also makes the SDK's client log lines useful
 from vmas_ros.viz.foxglove_messages import (  # noqa: F401 - re-exported (public names and helpers)
     _DISC_HEIGHT,
@@ -158,7 +158,7 @@ class FoxgloveBridge:
         port: TCP port; 0 picks a free one, read back from ``.port``.
         frame_id: fixed frame of the scene, poses and transforms.
         frame_prefix: goes before each agent's ``<agent>/base_link`` frame.
-        agent_names: ROS-style agent names (``convert.unique_names``), in
+        agent_names: ROS-style agent names (``env_snapshot.unique_names``), in
             ``world.agents`` order; they name topics and frames.
         on_twist: ``on_twist(agent_index, vx, vy, wz)`` for each valid Twist a
             client publishes on ``/<agent>/cmd_vel`` (called on the server's thread).
@@ -174,7 +174,7 @@ class FoxgloveBridge:
 
         bridge = FoxgloveBridge(port=8765, agent_names=node.agent_names,
                                 on_twist=lambda i, vx, vy, wz: commands.update({i: (vx, vy, wz)}))
-        snap = convert.Snapshot.take(world, env_index, lidars)
+        snap = env_snapshot.Snapshot.take(world, env_index, lidars)
         bridge.publish(snap, world.entities, scan_geometry, sim_time_ns)
         bridge.log_json("/rewards", {"agent_0": 0.1, "total": 0.3}, sim_time_ns)
         bridge.close()

@@ -35,7 +35,7 @@ except ImportError as _error:  # pragma: no cover - depends on the installation
         "vmas_ros.viz.foxglove_messages needs foxglove-sdk: pip install 'vmas_ros[foxglove]'"
     ) from _error
 
-from vmas_ros.ros.convert import yaw_to_quaternion
+from vmas_ros.simulator.env_snapshot import yaw_to_quaternion
 from vmas_ros.viz.foxglove_logs import THROTTLE_S as _THROTTLE_S
 
 __all__ = ["TwistCallback", "parse_twist", "MAX_CLIENT_MESSAGE_BYTES", "TWIST_SCHEMAS"]
