@@ -31,7 +31,7 @@ import vmas_ros
 from vmas_ros.record import McapRecorder
 from vmas_ros.ros import convert
 from vmas_ros.simulator import env_snapshot
-from vmas_ros.ros.cdr import padding_ranges, serialize_zeroed
+from vmas_ros.record.cdr import padding_ranges, serialize_zeroed
 from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.publish import StateMessages
 from vmas_ros.simulator.sensors import Lidar

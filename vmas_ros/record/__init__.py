@@ -6,6 +6,9 @@
 * :func:`serialize_tf_message` builds /tf's ``tf2_msgs/msg/TFMessage`` CDR
   without the (wheel-less) tf2_msgs package;
 * :func:`message_definition` gives the schema text of an installed message type;
+* :mod:`vmas_ros.record.cdr` serialises messages with their CDR padding
+  zeroed, so identical messages give identical bytes (the node's bulk
+  publishers use it too);
 * :func:`recover` turns the file of a killed recorder into a valid MCAP;
 * :mod:`vmas_ros.record.rosbag2` lays a recording out as one file or as a
   rosbag2 bag folder with its ``metadata.yaml``.

@@ -277,7 +277,7 @@ class McapRecorder:
 
         ``serialized`` (CDR bytes of ``message``) skips the serialisation;
         otherwise the message is serialised with its CDR padding bytes zeroed
-        (:func:`vmas_ros.ros.cdr.serialize_zeroed`).
+        (:func:`vmas_ros.record.cdr.serialize_zeroed`).
         ``qos`` ("reliable" or "best_effort") goes to the channel's
         ``offered_qos_profiles`` when the topic is first written. Returns False
         (and does nothing) for a topic the filter does not select.
@@ -287,7 +287,7 @@ class McapRecorder:
         if serialized is None:
             if message is None:
                 raise TypeError("write() needs a message or serialized bytes")
-            from vmas_ros.ros.cdr import serialize_zeroed
+            from vmas_ros.record.cdr import serialize_zeroed
 
             serialized = serialize_zeroed(message)  # padding zeroed: same message, same bytes
         return self._record(topic, type_name, serialized, log_time_ns, qos)

@@ -15,7 +15,7 @@ back to back in one byte arena; a step writes every changed number with four
 numpy scatters, then publishes each message's slice with ``publish(bytes)``.
 What subscribers and bags receive is, field for field, what ``publish(msg)`` of
 the same values would send (test/ros/test_publish.py checks it against the
-per-field conversion of ``convert``), with every CDR padding byte zero (cdr.py):
+per-field conversion of ``convert``), with every CDR padding byte zero (record/cdr.py):
 identical steps give identical bytes, and no stray heap memory goes out.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 
 from vmas_ros.ros import convert
-from vmas_ros.ros.cdr import serialize_zeroed
+from vmas_ros.record.cdr import serialize_zeroed
 from vmas_ros.ros.message_types import type_name
 from vmas_ros.ros.topic_audit import quiet_publisher_events
 from vmas_ros.simulator import env_snapshot
