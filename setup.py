@@ -61,10 +61,10 @@ setup(
     entry_points={
         "console_scripts": [
             "vmas-ros = vmas_ros.cli:main",
-            # startup.py installs the signal handlers, then imports the node (torch, rclpy)
+            # the startup modules install the signal handlers, then import the node (torch, rclpy)
             "sim_node = vmas_ros.ros.startup:sim_node_main",
             "policy_node = vmas_ros.ros.startup:policy_node_main",
-            "robot_fleet = vmas_ros.ros.startup:fleet_main",
+            "robot_fleet = vmas_ros.fleet.startup:fleet_main",
         ],
     },
     zip_safe=False,

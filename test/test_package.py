@@ -187,7 +187,7 @@ def test_installed_executable_runs(colcon_install):
 @pytest.mark.parametrize("exe", ["sim_node", "policy_node"])
 def test_installed_node_stops_cleanly_on_a_signal_during_its_imports(colcon_install, exe):
     """What `ros2 run vmas_ros sim_node` starts, stopped 0.3 s in (still importing torch): exit 0, one
-    line, no traceback (vmas_ros/ros/startup.py; test/ros/test_faults_early_signals.py has the rest)."""
+    line, no traceback (vmas_ros/ros/signal_guard.py; test/ros/test_faults_early_signals.py has the rest)."""
     import signal
     import time
 

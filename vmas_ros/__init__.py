@@ -4,7 +4,7 @@
 the engine, which pull in torch, load on first use. A node's entry point
 (``python -m vmas_ros.ros.sim_node``) imports this package before anything
 else, and must be able to install its signal handlers before torch's second of
-imports (see vmas_ros/ros/startup.py).
+imports (see vmas_ros/ros/signal_guard.py).
 """
 import importlib
 import sys

@@ -166,7 +166,7 @@ def catches_sigterm(pid: int) -> bool:
     """Whether process ``pid`` has a handler for SIGTERM (Linux: the SigCgt mask in /proc/<pid>/status).
 
     Python itself catches only SIGINT; a node's entry point installs its SIGTERM (and SIGINT) handler
-    first thing (vmas_ros/ros/startup.py). Until then the interpreter is still starting, which no
+    first thing (vmas_ros/ros/signal_guard.py). Until then the interpreter is still starting, which no
     program can guard: tests that signal a node "during its imports" wait for this too."""
     import signal
 

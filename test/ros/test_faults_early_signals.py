@@ -1,6 +1,6 @@
 """A SIGINT or SIGTERM in a node's first half second (while it imports torch and rclpy) is a clean stop.
 
-Before the entry points installed their handler first (vmas_ros/ros/startup.py),
+Before the entry points installed their handler first (vmas_ros/ros/signal_guard.py),
 such a signal gave a KeyboardInterrupt traceback from inside an import (exit 1
 or death by SIGINT; once a process hung on an import lock) or death by
 SIGTERM. Now it must give exit code 0, no traceback, one line saying so, and
@@ -130,13 +130,13 @@ def test_a_signal_during_the_imports_is_a_clean_stop(early_runs, label):
 
 RUNNING = """
     import os, signal, sys, time
-    from vmas_ros.ros import startup
-    startup.guard("probe")
+    from vmas_ros.ros import signal_guard
+    signal_guard.guard("probe")
     import rclpy
     from geometry_msgs.msg import Twist
     from vmas_ros.record import McapRecorder
     rclpy.init()  # installs rclpy's handlers, chained in front of the guard
-    startup.hand_over()
+    signal_guard.hand_over()
     recorder = McapRecorder(sys.argv[1])
     recorder.write("/a", "geometry_msgs/msg/Twist", Twist(), 0)  # swapping handlers here would drop rclpy's
     try:

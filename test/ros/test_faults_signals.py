@@ -126,7 +126,7 @@ def signal_runs(ros, bag_dir, sim_log_dir) -> Dict[str, Run]:
 def test_signal_leaves_a_finished_bag(signal_runs, label):
     run = signal_runs[label]
     if run.moment == "import":
-        # before rclpy and the node exist, the entry point's guard (vmas_ros/ros/startup.py) ends the
+        # before rclpy and the node exist, the entry point's guard (vmas_ros/ros/signal_guard.py) ends the
         # process with exit 0 and one line; no bag, or (had the imports been quick) a finished one
         assert run.returncode == 0, run.describe()
         assert "Traceback" not in run.process.stderr(), run.describe()

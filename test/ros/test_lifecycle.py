@@ -10,7 +10,7 @@ import rclpy
 import rclpy.node
 from rclpy._rclpy_pybind11 import RCLError
 
-from vmas_ros.ros import lifecycle, startup
+from vmas_ros.ros import lifecycle, signal_guard
 
 pytestmark = pytest.mark.ros
 
@@ -53,7 +53,7 @@ class _FailingNode(rclpy.node.Node):
     @staticmethod
     def _fail(signalled: bool) -> None:
         if signalled:
-            startup._guard.stopping = True
+            signal_guard._guard.stopping = True
         raise RuntimeError("Unable to convert call argument '0' to Python object")
 
 
@@ -61,8 +61,8 @@ class _FailingNode(rclpy.node.Node):
 def test_an_error_out_of_a_stop_signal_is_a_clean_stop(monkeypatch, signalled):
     """A SIGINT's KeyboardInterrupt raised inside rclpy's C++ code can come out as another error: after a
     stop signal that is a clean exit (0); without one the error is the node's and propagates."""
-    monkeypatch.setattr(startup, "_guard", startup._Guard("lifecycle_test"))
-    startup._guard.handed_over = True  # what run_node's hand_over() does; the handler is not installed
+    monkeypatch.setattr(signal_guard, "_guard", signal_guard._Guard("lifecycle_test"))
+    signal_guard._guard.handed_over = True  # what run_node's hand_over() does; the handler is not installed
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         if signalled:
@@ -88,10 +88,10 @@ def test_a_task_half_built_by_a_stop_signal_prints_no_traceback(monkeypatch, cap
     only that one; before a stop it is printed as usual."""
     from rclpy.task import Task
 
-    monkeypatch.setattr(startup, "_guard", startup._Guard("lifecycle_test"))
+    monkeypatch.setattr(signal_guard, "_guard", signal_guard._Guard("lifecycle_test"))
     monkeypatch.setattr(sys, "unraisablehook", sys.unraisablehook)  # put back after the test
-    startup.hand_over()
-    startup._guard.stopping = stopping
+    signal_guard.hand_over()
+    signal_guard._guard.stopping = stopping
     half_built = Task.__new__(Task)  # what an interrupted __init__ leaves behind
     del half_built
     other = _Broken()

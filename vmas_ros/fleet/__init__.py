@@ -19,7 +19,8 @@ Modules, one concern each, lowest first:
 * :mod:`.summary`: per-episode metrics and the summary file;
 * :mod:`.world`: the pieces above as one fleet stepped in time (no ROS);
 * :mod:`.params`: the node's parameter table;
-* :mod:`.messages` and :mod:`.node`: the ROS 2 side.
+* :mod:`.messages` and :mod:`.node`: the ROS 2 side;
+* :mod:`.startup`: the ``robot_fleet`` console-script entry (signal guard first).
 
 This package's ``__init__`` imports nothing, so that ``python -m
 vmas_ros.fleet.node`` can install its signal guard before rclpy loads.

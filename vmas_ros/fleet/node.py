@@ -21,7 +21,7 @@ imports torch or vmas_ros's engine.
 from __future__ import annotations
 
 if __name__ == "__main__":  # run as a program: a signal during the imports below must end it cleanly
-    from vmas_ros.ros.startup import guard
+    from vmas_ros.ros.signal_guard import guard
 
     guard("robot_fleet")
 

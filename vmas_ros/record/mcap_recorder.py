@@ -49,7 +49,7 @@ Signals
     run its Python handler at the next bytecode. The noted signals go to the
     original handlers as soon as the write is complete. A handler object with
     ``hold()`` and ``release()`` methods (sim_node's, from
-    :mod:`vmas_ros.ros.startup`) is not swapped but asked to hold the signal
+    :mod:`vmas_ros.ros.signal_guard`) is not swapped but asked to hold the signal
     itself, which keeps a C-level handler chained in front of it (rclpy's, which
     wakes the executor) installed. That costs a little on every write;
     :meth:`McapRecorder.batch` pays it once for a group of writes.
@@ -403,7 +403,7 @@ class McapRecorder:
         noted: list = []
         # Python handlers (signal.getsignal is callable) are held; handlers installed from C
         # (getsignal is None, e.g. rclpy's) run outside Python bytecode and are left alone.
-        # A handler that can hold signals itself (hold/release, e.g. vmas_ros.ros.startup's)
+        # A handler that can hold signals itself (hold/release, e.g. vmas_ros.ros.signal_guard's)
         # stays installed: swapping it would drop a C handler chained in front of it (rclpy's)
         holders, held = [], {}
         for sig in _DEFERRED:

@@ -15,7 +15,7 @@ can tell the three apart by the exit code alone:
   exits with code 4 (:data:`EXIT_RECORDING`);
 * SIGINT/SIGTERM (KeyboardInterrupt or an external shutdown) exit with 0; a
   signal before the node is built (during the imports) too, when the entry
-  point installed ``startup.guard`` (the ``sim_node``/``policy_node`` programs do).
+  point installed ``signal_guard.guard`` (the ``sim_node``/``policy_node`` programs do).
 
 In every case the node is destroyed before rclpy shuts down, which is where
 sim_node closes its bag: the bag is complete whichever way the node stops
@@ -39,7 +39,7 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
-from vmas_ros.ros import startup
+from vmas_ros.ros import signal_guard
 from vmas_ros.rostools.dds_clean import remove_stuck_segments, stuck_segments
 
 #: exit code for parameters refused at start
@@ -110,7 +110,7 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
         # a signal prompted by that message must not land inside the executor's constructor (rclpy then
         # prints a traceback from the half-built executor's __del__)
         executor = SingleThreadedExecutor()
-        startup.hand_over()  # a signal from here on stops the node (KeyboardInterrupt), see startup.py
+        signal_guard.hand_over()  # a signal from here on stops the node (KeyboardInterrupt), see signal_guard.py
         watch = threading.Timer(STARTUP_DDS_CHECK_S, _warn_if_dds_stuck, args=(name,))
         watch.daemon = True
         watch.start()
@@ -133,7 +133,7 @@ def run_node(name: str, make_node: Callable[[], Node], argv: Optional[List[str]]
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 0
     except Exception:
-        if rclpy.ok() and not startup.stop_requested():
+        if rclpy.ok() and not signal_guard.stop_requested():
             raise
         # a callback raced the shutdown a signal started, or the signal's KeyboardInterrupt came out of
         # rclpy's C++ code as another error: still a clean exit

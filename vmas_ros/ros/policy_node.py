@@ -23,7 +23,7 @@ type expected (``topic_audit.py``, as sim_node does for its commands).
 from __future__ import annotations
 
 if __name__ == "__main__":  # run as a program: a signal during the heavy imports below must end it cleanly
-    from vmas_ros.ros.startup import guard
+    from vmas_ros.ros.signal_guard import guard
 
     guard("policy_node")
 

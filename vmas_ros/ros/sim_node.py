@@ -22,7 +22,7 @@ unpaced (real_time_factor 0) the node runs several steps per timer callback.
 from __future__ import annotations
 
 if __name__ == "__main__":  # run as a program: a signal during the heavy imports below must end it cleanly
-    from vmas_ros.ros.startup import guard
+    from vmas_ros.ros.signal_guard import guard
 
     guard("sim_node")
 
