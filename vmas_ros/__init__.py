@@ -10,9 +10,8 @@ import importlib
 import sys
 import types
 
+from vmas_ros.compat.version import __version__
 from vmas_ros.scenarios import DEBUG_SCENARIOS, MAIN_SCENARIOS, MPE_SCENARIOS, list_scenarios  # no scenario imported
-
-__version__ = "0.1.0"
 
 # gymnasium.make("vmas_ros/<scenario>-v0"): registered once gymnasium is loaded, never importing it here
 from vmas_ros.compat.gymnasium_ids import register_when_gymnasium_loads  # noqa: E402

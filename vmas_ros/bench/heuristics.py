@@ -97,7 +97,7 @@ def evaluate_scenario(
     scenario_kwargs: Optional[dict] = None, progress=None,
 ) -> List[Evaluation]:
     """The heuristic's and random play's :class:`Evaluation` on scenario ``name``."""
-    import vmas_ros
+    from vmas_ros.envs.make_env import make_env
     from vmas_ros.scenarios import make_heuristic, task_score
 
     stand_in = task_score(name)
@@ -105,8 +105,8 @@ def evaluate_scenario(
     kwargs = {**score_kwargs, **(scenario_kwargs or {})}
     results = []
     for label in ("heuristic", "random"):
-        env = vmas_ros.make_env(name, num_envs=num_envs, device=device, seed=seed, compile_physics=False,
-                                **kwargs)  # eager: scores, not speed, and VMAS's heuristics score the same steps
+        env = make_env(name, num_envs=num_envs, device=device, seed=seed, compile_physics=False,
+                       **kwargs)  # eager: scores, not speed, and VMAS's heuristics score the same steps
         policy = make_heuristic(name, **kwargs) if label == "heuristic" else None
         score = torch.zeros(num_envs, device=env.device)
 

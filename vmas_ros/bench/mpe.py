@@ -141,9 +141,9 @@ def _vmas_case(side: str, num_envs: int, device: str, steps: int, compile_physic
     """VMAS's or vmas_ros's simple_spread; for vmas_ros ``compile_physics`` None is the default mode, whose
     warm-up runs on through its switch to the compiled step (``on_switch(compiled)`` says how it ended)."""
     if side == "vmas_ros":
-        import vmas_ros
+        from vmas_ros.envs.make_env import make_env
 
-        make = vmas_ros.make_env
+        make = make_env
         extra = {} if compile_physics is None else {"compile_physics": bool(compile_physics)}
     else:
         import vmas

@@ -47,7 +47,7 @@ def _timed_block(env, actions: List[List[torch.Tensor]]) -> float:
 def run_randomisation_benchmark(num_envs: int = DEFAULT_NUM_ENVS, steps: int = DEFAULT_STEPS, repeats: int = 5,
                                 modes: Sequence[str] = MODES, seed: int = 0, progress: bool = True) -> List[dict]:
     """One row per mode and configuration: median ms per step and the cost against randomisation off."""
-    import vmas_ros
+    from vmas_ros.envs.make_env import make_env
     from tqdm import tqdm
 
     if num_envs < 1 or steps < 1 or repeats < 1:
@@ -62,9 +62,9 @@ def run_randomisation_benchmark(num_envs: int = DEFAULT_NUM_ENVS, steps: int = D
     for mode in modes:
         envs = {}
         for name in names:
-            envs[name] = vmas_ros.make_env("navigation", num_envs=num_envs, seed=seed, continuous_actions=True,
-                                           compile_physics=mode == "compiled",
-                                           randomisation=CONFIGURATIONS[name] or None)
+            envs[name] = make_env("navigation", num_envs=num_envs, seed=seed, continuous_actions=True,
+                                  compile_physics=mode == "compiled",
+                                  randomisation=CONFIGURATIONS[name] or None)
         n_agents = envs["off"].n_agents
         actions = [[torch.rand(num_envs, 2, generator=generator) * 2 - 1 for _ in range(n_agents)]
                    for _ in range(steps)]

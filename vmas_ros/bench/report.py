@@ -124,7 +124,7 @@ def _version(package: str) -> Optional[str]:
 
 
 def _vmas_ros_version() -> str:
-    from vmas_ros import __version__
+    from vmas_ros.compat.version import __version__
 
     return __version__
 

@@ -107,7 +107,7 @@ def run_engine_soak(
     and so does ``max_minutes`` of wall time (0: no limit): the result then says
     exactly how many steps ran (``steps_done``).
     """
-    from vmas_ros import make_env
+    from vmas_ros.envs.make_env import make_env
 
     if num_envs < 1 or steps < 1 or sample_every < 1:
         raise ValueError("num_envs, steps and sample_every must be >= 1")

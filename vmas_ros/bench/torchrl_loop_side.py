@@ -40,9 +40,9 @@ def main(side: str, seed: int, overrides: dict = None) -> dict:
     if unknown:
         raise ValueError(f"unknown loop settings {unknown}; known: {sorted(CONFIG)}")
     if side == "vmas_ros":
-        import vmas_ros
+        from vmas_ros.compat.install import install_as_vmas
 
-        vmas_ros.install_as_vmas()
+        install_as_vmas()
     import torch
     from tensordict.nn import NormalParamExtractor, TensorDictModule
     from torch import nn

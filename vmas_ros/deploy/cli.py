@@ -88,10 +88,10 @@ def parse_params(items: List[str], option: str) -> Dict[str, Any]:
 
 def held_action_speed(scenario: str, kwargs: Dict[str, Any]) -> float:
     """m/s per action unit the scenario's first agent settles at when an action is held (see --cmd-vel-scale)."""
-    import vmas_ros
+    from vmas_ros.envs.make_env import make_env
     from vmas_ros.simulator.dynamics.diff_drive import DiffDrive
 
-    env = vmas_ros.make_env(scenario, num_envs=1, **kwargs)
+    env = make_env(scenario, num_envs=1, **kwargs)
     agent, world = env.world.agents[0], env.world
     if isinstance(agent.dynamics, DiffDrive) or hasattr(agent, "controller"):
         return 1.0

@@ -75,9 +75,9 @@ def engine_episodes(policy, scenario: str, kwargs: Dict[str, Any], episodes: int
     robot first stood on its goal (as robot_fleet's ``end_on_goals``): its
     coverage is taken there, and no collision after it counts.
     """
-    import vmas_ros
+    from vmas_ros.envs.make_env import make_env
 
-    env = vmas_ros.make_env(scenario, num_envs=episodes * OVERSAMPLE, seed=seed, device=device, **kwargs)
+    env = make_env(scenario, num_envs=episodes * OVERSAMPLE, seed=seed, device=device, **kwargs)
     obs = env.reset()
     radius = agent_radius(env)
     kept = _apart(robot_poses(env)[..., :2].cpu().numpy(), radius)[:episodes]

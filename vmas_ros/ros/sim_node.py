@@ -35,7 +35,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-import vmas_ros
+from vmas_ros.envs.make_env import make_env
 from vmas_ros.ros import convert, sim_setup
 from vmas_ros.simulator import env_snapshot
 from vmas_ros.ros.command import CommandGate, command_to_action
@@ -131,8 +131,8 @@ class SimNode(StepLoop, Node):
         limit_threads_for_small_batches(p.num_envs)
         try:
             device = resolve_device(p.device)
-            self.env = vmas_ros.make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed,
-                                         compile_physics=False, **p.kwargs())  # compile_physics: see below
+            self.env = make_env(p.scenario, num_envs=p.num_envs, device=device, seed=p.seed,
+                                compile_physics=False, **p.kwargs())  # compile_physics: see below
         except (ValueError, TypeError, MemoryError) as error:  # bad kwargs, or a world too large
             raise ConfigError(f"cannot build scenario {p.scenario!r}: {error}") from None
         world = self.env.world

@@ -32,7 +32,8 @@ import tempfile
 from pathlib import Path
 from typing import Any, Dict, Tuple, Union
 
-import vmas_ros
+from vmas_ros.envs.make_env import make_env
+from vmas_ros.compat.install import install_as_vmas
 
 SUPPORTED_ALGORITHMS = ("mappo", "ippo")
 # make_env's own arguments that BenchMARL passes along with the scenario kwargs
@@ -185,7 +186,7 @@ def _require_onnx() -> None:
 
 def export_benchmarl_run(run_dir: Union[str, Path], out_stem: Union[str, Path]) -> Tuple[Path, Path]:
     """Reload a BenchMARL run and write ``<out_stem>.onnx`` + ``<out_stem>.json``."""
-    vmas_ros.install_as_vmas()  # before benchmarl/torchrl import vmas
+    install_as_vmas()  # before benchmarl/torchrl import vmas
     import torch
 
     from vmas_ros.train.export import DeterministicPolicy, _shared_bounds, describe_env, export_policy
@@ -196,8 +197,8 @@ def export_benchmarl_run(run_dir: Union[str, Path], out_stem: Union[str, Path]) 
         experiment = _reload(checkpoint, Path(workdir))
         parts = _actor_parts(experiment)
         scenario, scenario_kwargs, env_level = _task_scenario(experiment)
-        env = vmas_ros.make_env(scenario, num_envs=1, continuous_actions=True, compile_physics=False, **env_level,
-                                **scenario_kwargs)  # only its spaces are read: nothing to compile for
+        env = make_env(scenario, num_envs=1, continuous_actions=True, compile_physics=False, **env_level,
+                       **scenario_kwargs)  # only its spaces are read: nothing to compile for
         env_info = describe_env(env)
         if env_info["agents"] != parts["agents"]:
             raise ValueError(f"BenchMARL's group agents {parts['agents']} differ from the scenario's agents "

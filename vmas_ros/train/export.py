@@ -86,7 +86,7 @@ def export_policy(actor_network: nn.Module, env_info: Dict[str, Any], scenario: 
     it trained with (``vmas_ros.envs.randomisation``), recorded in the JSON as
     every setting's ``[low, high]`` (all off when None).
     """
-    import vmas_ros
+    from vmas_ros.compat.version import __version__
 
     out_stem = Path(out_stem)
     if out_stem.suffix in (".onnx", ".json"):
@@ -119,7 +119,7 @@ def export_policy(actor_network: nn.Module, env_info: Dict[str, Any], scenario: 
         "action_type": "continuous",
         "onnx_file": onnx_path.name,
         "onnx_sha256": sha256_of_file(onnx_path),
-        "created_by": f"vmas_ros {vmas_ros.__version__}",
+        "created_by": f"vmas_ros {__version__}",
     }
     validate_metadata(meta, source="export")
     json_path.write_text(json.dumps(meta, indent=2) + "\n")

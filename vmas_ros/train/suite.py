@@ -170,11 +170,11 @@ def heuristic_return(scenario: str, num_envs: int, max_steps: int, seed: int, de
     same), so ``done_fraction`` counts only episodes the scenario itself ended
     (success), as in ``vmas-ros evaluate``, not the truncation every env reaches.
     """
-    import vmas_ros
+    from vmas_ros.envs.make_env import make_env
     from vmas_ros.bench.heuristics import episode_returns
     from vmas_ros.scenarios import make_heuristic
 
-    env = vmas_ros.make_env(scenario, num_envs=num_envs, device=device, seed=seed, continuous_actions=True)
+    env = make_env(scenario, num_envs=num_envs, device=device, seed=seed, continuous_actions=True)
     returns, _length, finished = episode_returns(env, make_heuristic(scenario), max_steps)
     return {"mean_return": float(returns.mean()), "done_fraction": float(finished.float().mean())}
 

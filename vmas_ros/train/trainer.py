@@ -32,7 +32,7 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers.samplers import SamplerWithoutReplacement
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-import vmas_ros
+from vmas_ros.envs.make_env import make_env
 from vmas_ros.envs.torchrl_env import TorchRLEnv
 from vmas_ros.train.algorithms import PPOAgent, build_agent
 from vmas_ros.train.checkpoint import CHECKPOINT_NAME, save_checkpoint
@@ -46,9 +46,9 @@ __all__ = ["Trainer", "evaluate_policy"]
 
 
 def _make_env(config: TrainConfig, num_envs: int, seed: int):
-    return vmas_ros.make_env(config.scenario, num_envs=num_envs, device=config.device, continuous_actions=True,
-                             max_steps=config.max_steps, seed=seed, terminated_truncated=True,
-                             randomisation=config.randomisation or None, **config.scenario_kwargs)
+    return make_env(config.scenario, num_envs=num_envs, device=config.device, continuous_actions=True,
+                    max_steps=config.max_steps, seed=seed, terminated_truncated=True,
+                    randomisation=config.randomisation or None, **config.scenario_kwargs)
 
 
 class Trainer:
