@@ -116,7 +116,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     import vmas_ros
     from vmas_ros.scenarios import make_heuristic
     from vmas_ros.simulator.heuristic_policy import heuristic_actions
-    from vmas_ros.viz.video import VIDEO_SUFFIXES, save_frames
+    from vmas_ros.simulator.video import VIDEO_SUFFIXES, save_frames
 
     out = Path(args.out)
     if out.suffix.lower() not in VIDEO_SUFFIXES:

@@ -3,7 +3,7 @@
 The public names and call signatures follow VMAS 1.5's ``vmas.simulator.rendering``
 so a VMAS scenario keeps working after its imports are re-prefixed. The
 implementation is ours: geoms are plain descriptions that draw themselves onto a
-:class:`vmas_ros.viz.canvas.Canvas` (Pillow) instead of issuing OpenGL calls.
+:class:`vmas_ros.simulator.canvas.Canvas` (Pillow) instead of issuing OpenGL calls.
 
 Semantics kept from VMAS because scenarios rely on them:
 
@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, List, Optional, Tuple, Uni
 import numpy as np
 
 if TYPE_CHECKING:  # the canvas imports nothing from here; keep import cycles impossible
-    from vmas_ros.viz.canvas import Canvas
+    from vmas_ros.simulator.canvas import Canvas
 
 __all__ = [
     "Geom", "Attr", "Transform", "Color", "LineStyle", "LineWidth", "TextLine", "Point",
@@ -432,7 +432,7 @@ class Viewer:
 
     def render(self, return_rgb_array: bool = False) -> Optional[np.ndarray]:
         """Draw permanent then one-time geoms, text last; clear the one-time ones."""
-        from vmas_ros.viz.canvas import Canvas
+        from vmas_ros.simulator.canvas import Canvas
 
         left, right, bottom, top = self.bounds or (-1.0, 1.0, -1.0, 1.0)
         canvas = Canvas(self.width, self.height, (left, right), (bottom, top))

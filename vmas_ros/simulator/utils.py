@@ -123,14 +123,14 @@ def as_index_tensor(index, batch_dim: int, device) -> Tensor:
 def save_video(name: str, frame_list: List, fps: int):
     """Write ``frame_list`` (``[H, W, 3]`` uint8 arrays from ``render(mode="rgb_array")``) as a video.
 
-    VMAS's name and arguments; our own writer (vmas_ros/viz/video.py) instead
+    VMAS's name and arguments; our own writer (vmas_ros/simulator/video.py) instead
     of OpenCV, so no ``cv2`` is needed: ``name + ".mp4"`` when ``imageio`` and
     ``imageio-ffmpeg`` are installed, otherwise ``name + ".gif"`` (Pillow, a core
     dependency). Returns the path written.
     """
     import importlib.util
 
-    from vmas_ros.viz.video import save_frames
+    from vmas_ros.simulator.video import save_frames
 
     suffix = ".mp4" if importlib.util.find_spec("imageio") is not None else ".gif"
     return save_frames(frame_list, f"{name}{suffix}", fps=fps)

@@ -268,7 +268,7 @@ def evaluate_policy(agent: PPOAgent, config: TrainConfig, episodes: int,
               "episode_reward_std": float(returns.std()) if episodes > 1 else 0.0,
               "done_fraction": float((~alive).float().mean())}
     if gif_path:
-        from vmas_ros.viz.video import save_frames
+        from vmas_ros.simulator.video import save_frames
 
         save_frames(frames, gif_path, fps=10)
         result["gif"] = str(gif_path)

@@ -238,7 +238,7 @@ def _draw_overlay(pygame, screen, font, lines: Sequence[str]) -> None:
 
 
 def _gif_path(render_name: str) -> Path:
-    from vmas_ros.viz.video import VIDEO_SUFFIXES
+    from vmas_ros.simulator.video import VIDEO_SUFFIXES
     path = Path(render_name)
     return path if path.suffix.lower() in VIDEO_SUFFIXES else path.with_name(path.name + ".gif")
 
@@ -261,7 +261,7 @@ def render_interactively(
         control_two_agents: also drive a second agent with W/A/S/D and Q/E.
         display_info: overlay the selected agent's name, observation, reward, done and step.
         save_render: at the end, save the session (frames as shown, overlay included)
-            with :func:`vmas_ros.viz.video.save_frames` to ``render_name`` (``.gif`` added
+            with :func:`vmas_ros.simulator.video.save_frames` to ``render_name`` (``.gif`` added
             unless it already ends in ``.gif``/``.png``/``.mp4``).
         steps: stop after this many steps (scripts, tests); ``None`` plays until ESC/close.
         fps: steps (= frames) per second; ``<= 0`` runs as fast as possible.
@@ -347,7 +347,7 @@ def render_interactively(
         env.close()
 
     if save_render and frames:
-        from vmas_ros.viz.video import save_frames
+        from vmas_ros.simulator.video import save_frames
 
         path = save_frames(frames, _gif_path(render_name), fps=fps if fps > 0 else 10)
         print(f"saved the interactive session ({len(frames)} frames) to {path}")

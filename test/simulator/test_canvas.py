@@ -7,7 +7,7 @@ import torch
 
 from vmas_ros.simulator import rendering
 from vmas_ros.simulator.shapes import Box, Line, Sphere
-from vmas_ros.viz.canvas import Canvas
+from vmas_ros.simulator.canvas import Canvas
 
 WHITE = np.array([255, 255, 255])
 

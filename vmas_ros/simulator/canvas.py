@@ -4,7 +4,9 @@ VMAS draws with OpenGL, which needs a display (or EGL) and a GPU-ish stack that
 servers, CI runners and containers rarely have. A frame of a 2D simulator is a
 handful of polygons, so Pillow is enough: we draw into an RGB image and hand
 back a numpy array, which is all ``render(mode="rgb_array")`` and video
-writers need.
+writers need. It sits beside :mod:`vmas_ros.simulator.rendering` (VMAS's
+module of drawing primitives), whose ``Viewer`` draws onto it; ``vmas_ros.viz``
+re-exports it.
 
 Conventions
 -----------

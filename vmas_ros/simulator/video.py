@@ -3,6 +3,8 @@
 GIF and PNG only need Pillow (a core dependency) so recording a rollout works
 everywhere. MP4 needs an ffmpeg binary, which we do not want to require; it is
 used through ``imageio`` + ``imageio-ffmpeg`` when those are installed.
+It sits in the simulator because VMAS's ``simulator.utils.save_video`` writes
+through it; ``vmas_ros.viz`` re-exports :func:`save_frames`.
 """
 from __future__ import annotations
 
