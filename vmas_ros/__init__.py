@@ -35,7 +35,7 @@ def __getattr__(name: str):
         globals()["make_env"] = make_env
         return make_env
     if name == "render_interactively":
-        from vmas_ros.viz.interactive import render_interactively
+        from vmas_ros.interactive_rendering import render_interactively
 
         return render_interactively
     if name == "Wrapper":  # VMAS's top level offers the enum of wrapper names

@@ -203,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--num-envs", type=int, default=256, help="parallel envs (default 256)")
     demo.add_argument("--image", default=None, help="save a PNG of env 0 at the end")
     demo.set_defaults(func=cmd_demo)
-    from vmas_ros.viz.interactive import add_play_arguments, run_play_command
+    from vmas_ros.interactive_rendering import add_play_arguments, run_play_command
 
     _add_delegated(sub, "play", "drive agents with the keyboard in a pygame window",
                    add_play_arguments, run_play_command)

@@ -18,7 +18,7 @@ from vmas_ros.scenarios import load
 from vmas_ros.simulator.core import Agent, Landmark, Sphere, World
 from vmas_ros.simulator.dynamics.holonomic_with_rot import HolonomicWithRotation
 from vmas_ros.simulator.scenario import BaseScenario
-from vmas_ros.viz.interactive import (
+from vmas_ros.interactive_rendering import (
     InteractivePlayer,
     add_play_arguments,
     format_observation,
@@ -244,7 +244,7 @@ def test_play_command_helpers(tmp_path, capsys):
 # ------------------------------------------------------------------- a real X server
 def test_subprocess_under_xvfb_or_dummy():
     """A real display (Xvfb) when xvfb-run exists; otherwise the same run on SDL's dummy driver."""
-    code = "from vmas_ros.viz.interactive import render_interactively; render_interactively('simple_spread', steps=5)"
+    code = "from vmas_ros.interactive_rendering import render_interactively; render_interactively('simple_spread', steps=5)"
     # report which SDL video driver really ran (the window is closed by then, so ask SDL's env choice)
     code += "; import pygame; pygame.display.init(); print('driver', pygame.display.get_driver())"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
