@@ -78,9 +78,9 @@ def _lidar_bytes(world, batch: int) -> int:
 def estimate_step_bytes(world) -> Dict[str, int]:
     """The lower bound of a step's peak (see the module docstring), by part: ``state``, ``contacts``,
     ``grid``, ``lidars`` (bytes)."""
-    from vmas_ros.simulator.tables import _grid_members
+    from vmas_ros.simulator.tables import grid_members
 
-    batch, members = world.batch_dim, len(_grid_members(world, world.entities))
+    batch, members = world.batch_dim, len(grid_members(world, world.entities))
     return {
         "state": 4 * STATE_FLOATS * len(world.entities) * batch,
         "contacts": 4 * PAIR_FLOATS * _pairs(world, members) * batch,

@@ -223,7 +223,7 @@ def collide_with_all(other: "Entity") -> bool:
     return True
 
 
-def _grid_members(world, entities) -> List[int]:
+def grid_members(world, entities) -> List[int]:
     """Entities a :class:`SphereGroup` can hold (spheres that collide with everything, movable, in no
     joint), if there are enough of them for the grid to pay off; else none."""
     from vmas_ros.simulator.thresholds import GRID_MIN_SPHERES
@@ -349,7 +349,7 @@ def build_tables(world) -> WorldTables:
     lin = [_value_or(e.linear_friction, world_lin) for e in entities]
     ang = [_value_or(e.angular_friction, world_ang) for e in entities]
     gravity_force, has_gravity = _gravity_force(world, entities)
-    grouped = _grid_members(world, entities)
+    grouped = grid_members(world, entities)
     inf = math.inf
     return WorldTables(
         n_entities=len(entities),
