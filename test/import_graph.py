@@ -19,20 +19,27 @@ How an import becomes an edge between two files (modules):
 A folder is a first-level subpackage of ``vmas_ros`` (``vmas_ros.ros``,
 ``vmas_ros.simulator``...); the package's own top-level files form the folder
 ``vmas_ros``. Folder edges are the file edges between different folders.
+A private name is one that starts with an underscore (dunders such as
+``__version__`` are not private): a module ``_io`` or a name ``_helper``;
+:func:`private_imports` lists the imports of such names from another folder.
+
+Every function takes the package's name (``vmas_ros`` by default), so the
+reader can be tried on a small package of its own (test_import_graph.py).
+Run this file to print the circles and the folder graph.
 """
 from __future__ import annotations
 
 import ast
 from pathlib import Path
-from typing import Dict, Iterable, List, Set
+from typing import Dict, Iterable, Iterator, List, Mapping, Optional, Set, Tuple
 
 PACKAGE = "vmas_ros"
 
 
-def modules_of(root: Path) -> Dict[str, Path]:
-    """Every module of the package under ``root`` (the repository): dotted name -> file."""
+def modules_of(root: Path, package: str = PACKAGE) -> Dict[str, Path]:
+    """Every module of ``package`` under ``root`` (the repository): dotted name -> file."""
     found = {}
-    for path in sorted((root / PACKAGE).rglob("*.py")):
+    for path in sorted((root / package).rglob("*.py")):
         parts = list(path.relative_to(root).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts.pop()
@@ -40,11 +47,12 @@ def modules_of(root: Path) -> Dict[str, Path]:
     return found
 
 
-def _is_package(name: str, modules: Dict[str, Path]) -> bool:
-    return name in modules and modules[name].name == "__init__.py"
+def packages_of(modules: Mapping[str, Path]) -> Set[str]:
+    """The modules that are packages (a folder with an ``__init__.py``)."""
+    return {name for name, path in modules.items() if path.name == "__init__.py"}
 
 
-def _deepest(name: str, modules: Dict[str, Path]) -> str:
+def _deepest(name: str, modules: Mapping[str, Path]) -> str:
     parts = name.split(".")
     while parts and ".".join(parts) not in modules:
         parts.pop()
@@ -68,13 +76,18 @@ def _imports(tree: ast.AST) -> Iterable[ast.AST]:
         stack.extend(ast.iter_child_nodes(node))
 
 
-def edges_of(name: str, path: Path, modules: Dict[str, Path]) -> Set[str]:
-    """The modules of the package that module ``name`` (file ``path``) imports."""
+def _in_package(name: str, package: str) -> bool:
+    return name == package or name.startswith(package + ".")
+
+
+def imported_names(name: str, path: Path, modules: Mapping[str, Path]) -> Iterator[Tuple[str, Optional[str]]]:
+    """What module ``name`` (file ``path``) imports: ``(module, name)`` pairs, ``name`` None when the
+    module itself is imported (``import a.b``, or ``from a import b`` where ``b`` is a submodule)."""
     here = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    targets: Set[str] = set()
     for node in _imports(ast.parse(path.read_text(encoding="utf-8"), str(path))):
         if isinstance(node, ast.Import):
-            targets.update(_deepest(alias.name, modules) for alias in node.names)
+            for alias in node.names:
+                yield _deepest(alias.name, modules), None
             continue
         base = node.module or ""
         if node.level:
@@ -82,38 +95,66 @@ def edges_of(name: str, path: Path, modules: Dict[str, Path]) -> Set[str]:
             base = ".".join(anchor + ([base] if base else []))
         for alias in node.names:
             submodule = f"{base}.{alias.name}"
-            targets.add(submodule if submodule in modules else _deepest(base, modules))
-    return {t for t in targets if t and t.startswith(PACKAGE) and t != name}
+            if submodule in modules:
+                yield submodule, None
+            else:
+                yield _deepest(base, modules), alias.name
 
 
-def import_graph(root: Path) -> Dict[str, Set[str]]:
+def edges_of(name: str, path: Path, modules: Mapping[str, Path], package: str = PACKAGE) -> Set[str]:
+    """The modules of ``package`` that module ``name`` (file ``path``) imports."""
+    return {target for target, _ in imported_names(name, path, modules)
+            if target and _in_package(target, package) and target != name}
+
+
+def import_graph(root: Path, package: str = PACKAGE) -> Dict[str, Set[str]]:
     """module -> the package's modules it imports."""
-    modules = modules_of(root)
-    return {name: edges_of(name, path, modules) for name, path in modules.items()}
+    modules = modules_of(root, package)
+    return {name: edges_of(name, path, modules, package) for name, path in modules.items()}
 
 
-def folder_of(module: str) -> str:
-    parts = module.split(".")
-    return ".".join(parts[:2]) if len(parts) > 2 or (len(parts) == 2 and _has_children(module)) else PACKAGE
+def folder_of(module: str, packages: Set[str], package: str = PACKAGE) -> str:
+    """The folder of ``module``: its first-level subpackage of ``package`` (``packages`` lists the
+    subpackages), or ``package`` itself for the package's own top-level files."""
+    first = ".".join(module.split(".")[:2])
+    return first if first != package and first in packages else package
 
 
-_PACKAGES: Set[str] = set()
-
-
-def _has_children(module: str) -> bool:
-    return module in _PACKAGES
-
-
-def folder_graph(graph: Dict[str, Set[str]], root: Path) -> Dict[str, Set[str]]:
-    """folder -> the folders its files import (itself left out)."""
-    modules = modules_of(root)
-    _PACKAGES.clear()
-    _PACKAGES.update(name for name in modules if _is_package(name, modules))
+def folder_graph(graph: Mapping[str, Set[str]], packages: Set[str], package: str = PACKAGE,
+                 skip: Iterable[str] = ()) -> Dict[str, Set[str]]:
+    """folder -> the folders its files import (itself left out). The imports of the modules named in
+    ``skip`` and of the modules below them are left out too."""
+    skip = tuple(skip)
     folders: Dict[str, Set[str]] = {}
     for module, targets in graph.items():
-        own = folder_of(module)
-        folders.setdefault(own, set()).update(folder_of(t) for t in targets if folder_of(t) != own)
+        own = folder_of(module, packages, package)
+        found = folders.setdefault(own, set())
+        if any(module == s or module.startswith(s + ".") for s in skip):
+            continue
+        found.update(folder_of(t, packages, package) for t in targets)
+        found.discard(own)
     return folders
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_imports(root: Path, package: str = PACKAGE) -> List[Tuple[str, str]]:
+    """``(importer, what)`` for every import of an underscore name (a module or a name in one) of
+    another folder, ``what`` being the dotted path imported."""
+    modules = modules_of(root, package)
+    packages = packages_of(modules)
+    found = []
+    for name, path in modules.items():
+        own = folder_of(name, packages, package)
+        for target, imported in imported_names(name, path, modules):
+            if not _in_package(target, package) or folder_of(target, packages, package) == own:
+                continue
+            what = target if imported is None else f"{target}.{imported}"
+            if any(_private(part) for part in what.split(".")):
+                found.append((name, what))
+    return sorted(found)
 
 
 def circles(graph: Dict[str, Set[str]]) -> List[List[str]]:
@@ -162,3 +203,19 @@ def circles(graph: Dict[str, Set[str]]) -> List[List[str]]:
         if node not in index:
             visit(node)
     return sorted(found, key=lambda c: (-len(c), c))
+
+
+def main() -> None:
+    root = Path(__file__).resolve().parents[1]
+    graph = import_graph(root)
+    packages = packages_of(modules_of(root))
+    for circle in circles(graph):
+        print(len(circle), circle)
+    for folder, targets in sorted(folder_graph(graph, packages).items()):
+        print(folder, "->", sorted(targets))
+    for importer, what in private_imports(root):
+        print("private:", importer, "imports", what)
+
+
+if __name__ == "__main__":
+    main()
