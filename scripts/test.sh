@@ -2,8 +2,17 @@
 # Set up the venv (scripts/setup.sh), then run the test suite in it.
 # Extra arguments go to pytest, e.g. `bash scripts/test.sh test/test_package.py -x`.
 # With no file arguments pytest collects `test/` (testpaths in pytest.ini).
+# `--quick` first: the contributors' tier (engine, scenario registry, env API, policies and the
+# import graph, without the slow and ROS tests), about two minutes; CI runs everything.
 # Exits with pytest's exit code.
 set -euo pipefail
+
+QUICK=()
+if [ "${1:-}" = "--quick" ]; then
+  shift
+  QUICK=(-m "not slow and not ros" test/simulator test/envs test/policy test/scenarios/test_registry.py
+         test/test_import_graph.py --ignore=test/simulator/test_properties.py)
+fi
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -26,4 +35,4 @@ export PATH="$VENV/bin:$PATH"
 echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE" \
      "RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"
 
-exec "$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider "$@"
+exec "$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider ${QUICK[@]+"${QUICK[@]}"} "$@"
