@@ -64,21 +64,36 @@ class OwnRandomStreams:
             self._swap_torch_rng(callers)
             self._rng_state["numpy"], self._rng_state["python"] = host
 
-    def _swap_torch_rng(self, callers: Optional[dict]) -> Optional[dict]:
+    def _swap_torch_rng(self, callers):
         """Swap torch's streams: given None, save the caller's and install this env's (returns the caller's);
-        given the caller's, keep this env's as they are now and restore the caller's."""
+        given the caller's, keep this env's as they are now and restore the caller's.
+
+        Straight on the default generator, without a dict, on the CPU: a step does this twice, and at one
+        env the wrappers cost as much as the copies of the generator's state.
+        """
+        generator = torch.default_generator
+        own = self._rng_state
+        if "cuda" in own:
+            return self._swap_with_cuda(callers)
+        if callers is None:
+            callers = generator.get_state()
+            generator.set_state(own["torch"])
+            return callers
+        own["torch"] = generator.get_state()
+        generator.set_state(callers)
+        return None
+
+    def _swap_with_cuda(self, callers: Optional[dict]) -> Optional[dict]:
+        """:meth:`_swap_torch_rng` for an env on a CUDA device: its CPU and CUDA streams both."""
+        own = self._rng_state
         if callers is None:
             callers = self._capture_rng()
-            torch.random.set_rng_state(self._rng_state["torch"])
-            if "cuda" in self._rng_state:
-                torch.cuda.set_rng_state(self._rng_state["cuda"], self.device)
+            torch.random.set_rng_state(own["torch"])
+            torch.cuda.set_rng_state(own["cuda"], self.device)
             return callers
-        mine = self._capture_rng()
-        mine["numpy"], mine["python"] = self._rng_state["numpy"], self._rng_state["python"]
-        self._rng_state = mine
+        own.update(self._capture_rng())
         torch.random.set_rng_state(callers["torch"])
-        if "cuda" in callers:
-            torch.cuda.set_rng_state(callers["cuda"], self.device)
+        torch.cuda.set_rng_state(callers["cuda"], self.device)
         return None
 
     def seed(self, seed: Optional[int] = None) -> List[int]:
