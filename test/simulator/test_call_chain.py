@@ -61,11 +61,16 @@ def _eager_chain(env) -> Chain:
 
 
 def _compiled_entry(env) -> Chain:
-    """The package frames under which the compiled step runs (torch's code called from the direct call)."""
+    """The package frames under which the compiled step runs (torch's code, or inductor's generated code,
+    called from the direct call)."""
+    from torch._inductor.runtime.cache_dir_utils import cache_dir
+
+    generated = cache_dir()
     seen: List[Chain] = []
 
     def on_call(frame):
-        if f"{os.sep}torch{os.sep}" in frame.f_code.co_filename:
+        filename = frame.f_code.co_filename
+        if f"{os.sep}torch{os.sep}" in filename or filename.startswith(generated):
             chain = _package_frames(frame)
             if chain and chain[-1] == ("simulator/compiling.py", "_compiled_call"):
                 seen.append(chain)

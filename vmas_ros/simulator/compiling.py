@@ -170,9 +170,9 @@ class _OneGraph:
             try:
                 if kwargs:
                     raise NotTraceable("keyword arguments")
-                compiled, tensors, build = self._direct.prepare(*args)
+                compiled, inputs, build = self._direct.prepare(*args)
                 self.one_graph = True
-                return build(compiled(*tensors))
+                return build(compiled(inputs))
             except NotTraceable as why:
                 _log.debug("vmas_ros: %s compiles through torch.compile: %s", getattr(self._fn, "__name__", self._fn), why)
                 self._direct, self.one_graph = None, None

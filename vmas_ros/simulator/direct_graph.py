@@ -8,7 +8,8 @@ caller names (:class:`vmas_ros.simulator.compiling.LayoutCompiled`). So
 :class:`DirectGraph` traces such a function once per input signature into an
 FX graph of ATen ops (``make_fx``, on fake tensors), compiles that graph with
 inductor (``standalone_compile``: the same compiler and disk caches
-torch.compile uses), and calls the compiled code directly. Its only per-call work is
+torch.compile uses), and calls the compiled code directly (its generated
+code itself where that is checked to be the same, :mod:`~vmas_ros.simulator.bare_call`). Its only per-call work is
 flattening the arguments and checking their shapes, strides, dtypes and
 devices against the signature it compiled for.
 
@@ -36,6 +37,7 @@ except ImportError:  # a torch without dynamo's C++ guards
     _TensorGuards = None
 
 from vmas_ros.simulator.background_compile import copy_inputs
+from vmas_ros.simulator.bare_call import bare_call
 from vmas_ros.simulator.structure_code import PRIMITIVES
 from vmas_ros.simulator.structure_code import TENSOR as _TENSOR
 from vmas_ros.simulator.structure_code import builder, picker
@@ -175,16 +177,19 @@ class DirectGraph:
     def __init__(self, fn: Callable, varying: Optional[Sequence[int]] = None) -> None:
         self._fn = fn
         self._varying = None if varying is None else tuple(varying)
-        #: signature -> (compiled code, output builder)
-        self._graphs: Dict[Hashable, Tuple[Callable, Callable]] = {}
+        #: signature -> (compiled code, the constants its inputs follow, output builder)
+        self._graphs: Dict[Hashable, Tuple[Callable, list, Callable]] = {}
         #: the last structure of arguments seen: its picker, and per signature met with it (a check of the
         #: tensors' metadata, whether the check's tensors need gradients, the graph entry)
-        self._route: Optional[Tuple[Callable, List[Tuple[Callable, bool, Tuple[Callable, Callable]]]]] = None
+        self._route: Optional[Tuple[Callable, List[Tuple[Callable, bool, Tuple[Callable, list, Callable]]]]] = None
+        #: how many of its graphs are called at their generated code (:mod:`~vmas_ros.simulator.bare_call`)
+        self.bare_graphs = 0
 
     def prepare(self, *args) -> Tuple[Callable, List[torch.Tensor], Callable]:
-        """``(compiled code, its tensor inputs, output builder)`` for a call with ``args``, compiling on a new
-        signature; the caller runs ``build(compiled(*tensors))``, so that no frame of this module stands
-        between it and the compiled code.
+        """``(compiled code, its inputs, output builder)`` for a call with ``args``, compiling on a new
+        signature; the caller runs ``build(compiled(inputs))``, so that no frame of this module stands
+        between it and the compiled code. ``inputs`` is a new list (the compiled code empties it): the
+        graph's constants, then the tensors taken from ``args``.
 
         The arguments' structure is taken apart by closures made for it
         (:mod:`~vmas_ros.simulator.structure_code`) while it stays the same;
@@ -198,7 +203,7 @@ class DirectGraph:
                     if same_metadata(*tensors):
                         if needs_grad and torch.is_grad_enabled():
                             raise NotTraceable("autograd must see the inputs")
-                        return entry[0], tensors, entry[1]
+                        return entry[0], [*entry[1], *tensors], entry[2]
         return self._prepare_walking(args)
 
     def _prepare_walking(self, args: tuple) -> Tuple[Callable, List[torch.Tensor], Callable]:
@@ -213,13 +218,13 @@ class DirectGraph:
         if entry is None:
             if len(self._graphs) >= MAX_SIGNATURES:
                 raise NotTraceable(f"called with more than {MAX_SIGNATURES} input signatures")
-            compiled, output = self._compile(args, structure, tensors)
-            entry = self._graphs[key] = (compiled, builder(output))
+            compiled, constants, output = self._compile(args, structure, tensors)
+            entry = self._graphs[key] = (compiled, constants, builder(output))
         route = self._route
         if route is None or route[0](args) is None:  # a new structure: the route follows it
             route = self._route = (picker(structure, varying), [])
         route[1].append((_same_metadata(tensors), any(t.requires_grad for t in tensors), entry))
-        return entry[0], tensors, entry[1]
+        return entry[0], [*entry[1], *tensors], entry[2]
 
     def _arguments(self, args: tuple, varying_args) -> tuple:
         """``args`` with the varying positions taken from ``varying_args`` (all of them when all vary)."""
@@ -231,10 +236,10 @@ class DirectGraph:
         return tuple(full)
 
     def __call__(self, *args):
-        compiled, tensors, build = self.prepare(*args)
-        return build(compiled(*tensors))
+        compiled, inputs, build = self.prepare(*args)
+        return build(compiled(inputs))
 
-    def _compile(self, args: tuple, structure, tensors: List[torch.Tensor]) -> Tuple[Callable, object]:
+    def _compile(self, args: tuple, structure, tensors: List[torch.Tensor]) -> Tuple[Callable, list, object]:
         from torch._inductor import standalone_compile
         from torch.fx.experimental.proxy_tensor import make_fx
 
@@ -271,4 +276,6 @@ class DirectGraph:
             raise NotTraceable(f"compiling failed: {type(error).__name__}: {error}") from error
         global _compiled_count
         _compiled_count += 1
-        return compiled, output[0]
+        call, constants, bare = bare_call(compiled, tensors)  # its generated code straight, where that is the same
+        self.bare_graphs += bare
+        return call, constants, output[0]
