@@ -120,6 +120,7 @@ def test_load_adapter_names_the_problem():
     ("adapter", "no_colon", "package.module:Class"),
     ("adapter_kwargs", "[1, 2]", "mapping"),
     ("cmd_vel_scale", "fast", "finite"),
+    ("act_on", "scans", "act_on must be one of timer, scan, got 'scans'"),
     ("nope", 1, "unknown parameter"),
 ])
 def test_policy_node_parameters_are_validated(name, value, fragment):

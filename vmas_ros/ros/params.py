@@ -298,6 +298,8 @@ def resolve_device(device: str) -> str:
 
 # ---------------------------------------------------------------- policy_node
 POLICY_OUTPUTS = ("action", "cmd_vel")
+#: when policy_node acts: on its own timer, or when new scans arrive (vmas_ros.ros.policy_trigger)
+ACT_ON = ("timer", "scan")
 #: a policy runs at most this often (one ONNX call per tick); more is a unit mistake (ms for Hz)
 MAX_POLICY_RATE = 1000.0
 
@@ -336,7 +338,10 @@ POLICY_PARAMS = ParamTable("policy_node", [
           minimum=0.0, note="(0: none)"),
     Param("max_angular_accel", 0.0, "limit on the change of angular.z per second, rad/s^2", runtime=True,
           minimum=0.0, note="(0: none)"),
-    Param("rate_hz", 10.0, "policy steps per second", runtime=True, minimum=MIN_RATE, maximum=MAX_POLICY_RATE),
+    Param("rate_hz", 10.0, "policy steps per second; act_on: scan: the longest wait, 1 / rate_hz, after a set's "
+          "first new scan", runtime=True, minimum=MIN_RATE, maximum=MAX_POLICY_RATE),
+    Param("act_on", "timer", "timer: act at rate_hz; scan: act once every scanning robot has a new scan (the "
+          "adapter's sensor_msgs/LaserScan topics), or 1 / rate_hz after the first new one", choices=ACT_ON),
     Param("observation_timeout", 0.5, "seconds after which an input message is too old to act on", runtime=True,
           minimum=0.0, strict=True),
     Param("adapter", "", "observation adapter: navigation, simple_spread, diff_drive, goal or package.module:Class; "

@@ -2,11 +2,13 @@
 
 It loads ``<stem>.json`` + ``<stem>.onnx`` (``vmas_ros.policy.OnnxPolicy``),
 builds every agent's observation from ROS messages through an observation
-adapter (default: sim_node's ``<agent>/observation``), and publishes at
-``rate_hz`` either ``<agent>/action`` (std_msgs/Float32MultiArray, the raw
-action vector sim_node takes) or, with ``output: cmd_vel``,
-``<agent>/cmd_vel``: a body-frame twist (REP 103) as geometry_msgs/Twist or,
-with ``use_stamped_cmd_vel``, TwistStamped (Jazzy's diff_drive_controller).
+adapter (default: sim_node's ``<agent>/observation``), and publishes, at
+``rate_hz`` or (``act_on: scan``) as soon as every robot's new scan is in
+(``policy_trigger.py``), either ``<agent>/action``
+(std_msgs/Float32MultiArray, the raw action vector sim_node takes) or, with
+``output: cmd_vel``, ``<agent>/cmd_vel``: a body-frame twist (REP 103) as
+geometry_msgs/Twist or, with ``use_stamped_cmd_vel``, TwistStamped (Jazzy's
+diff_drive_controller).
 How an action becomes a twist (rotation by the odometry's heading, a point
 ahead of a diff-drive base's wheel axis, limits) is in ``policy_commands.py``.
 
@@ -43,6 +45,7 @@ from vmas_ros.ros.params import POLICY_PARAMS, PolicyNodeParams, run_checked
 from vmas_ros.ros.policy_commands import CommandLimiter, body_commands, needs_heading, resolve_action_kind
 from vmas_ros.ros.policy_inputs import AgentInputs
 from vmas_ros.ros.policy_outputs import ActionOutput, CmdVelOutput
+from vmas_ros.ros.policy_trigger import ScanTrigger, scan_topics
 from vmas_ros.ros.topic_audit import TopicAudit
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -52,7 +55,7 @@ WARN_PERIOD = 2.0
 
 
 class PolicyNode(Node):
-    """Runs one exported policy for all its agents at a fixed rate."""
+    """Runs one exported policy for all its agents, at a fixed rate or when new scans arrive."""
 
     def __init__(self, **overrides: Any) -> None:
         super().__init__("policy_node")
@@ -78,6 +81,7 @@ class PolicyNode(Node):
                                       f"not nav_msgs/Odometry")
         #: topics whose last message stands until replaced (goals): never too old to act on
         self.standing = set(getattr(self.adapter, "standing_topics", lambda: ())())
+        self.trigger_topics = self._trigger_topics(topics)
         self.inputs = AgentInputs(self.agent_names, topics, odom_topics, lambda: self.params.observation_timeout)
         self.latest: Dict[str, Tuple[Any, float]] = {}  # topic -> (message, monotonic arrival)
         inputs = [self.create_subscription(msg_type, topic, lambda msg, t=topic: self._on_message(t, msg), ACCEPT_ANY)
@@ -92,11 +96,19 @@ class PolicyNode(Node):
         self._started = time.monotonic()
         self.published = 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
+        self.trigger: Optional[ScanTrigger] = None
+        if self.trigger_topics:
+            self.trigger = ScanTrigger(self, self.trigger_topics, self._tick, lambda: 1.0 / self.params.rate_hz,
+                                       lambda: self.params.observation_timeout, time.monotonic)
+            # with no scans at all nothing acts, so nothing would say what is missing: this does
+            self._idle = self.create_timer(WARN_PERIOD, self._check_idle)
+            when = self.trigger.describe()
+        else:
+            self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
+            when = f"at {self.params.rate_hz} Hz"
         self.get_logger().info(
             f"policy_node: {self.policy!r} for {self.agent_names}, reading {sorted(topics)}, "
-            f"publishing {self.output.type_name} on <agent>/{self.output.topic} at {self.params.rate_hz} Hz"
-            + self._command_note(why)
+            f"publishing {self.output.type_name} on <agent>/{self.output.topic} {when}" + self._command_note(why)
         )
 
     def _command_note(self, why: str) -> str:
@@ -113,6 +125,17 @@ class PolicyNode(Node):
         return f"; commands from {frame} ({self.action_kind}: {why}){base}, scaled by {p.cmd_vel_scale}"
 
     # ----------------------------------------------------------------- set-up
+    def _trigger_topics(self, topics: Dict[str, type]) -> List[str]:
+        """``act_on: scan``: the adapter's scan topics, whose arrivals trigger actions (timer: none)."""
+        if self.params.act_on != "scan":
+            return []
+        found = scan_topics(topics)
+        if not found:
+            adapter = self.params.adapter or "(default: <agent>/observation)"
+            raise ConfigError(f"act_on: scan needs scans to act on, but adapter {adapter} reads no "
+                              f"sensor_msgs/LaserScan topic (it reads {', '.join(sorted(topics))}); use act_on: timer")
+        return found
+
     def _load_policy(self):
         from vmas_ros.policy.onnx_policy import OnnxPolicy
 
@@ -141,8 +164,11 @@ class PolicyNode(Node):
         for parameter in parameters:
             setattr(self.params, parameter.name, float(parameter.value))
             if parameter.name == "rate_hz":
-                self._timer.cancel()
-                self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
+                if self.trigger is not None:
+                    self.trigger.set_period()
+                else:
+                    self._timer.cancel()
+                    self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
                 self.limiter.period = 1.0 / self.params.rate_hz
         self._set_limits()
         return SetParametersResult(successful=True)
@@ -150,6 +176,13 @@ class PolicyNode(Node):
     # ---------------------------------------------------------------- running
     def _on_message(self, topic: str, msg: Any) -> None:
         self.latest[topic] = (msg, time.monotonic())
+        if self.trigger is not None and topic in self.trigger_topics:
+            self.trigger.on_scan(topic)  # may act right here, in this callback
+
+    def _check_idle(self) -> None:
+        """``act_on: scan`` with no action for a while: judge the inputs (and warn) without acting."""
+        if time.monotonic() - self.trigger.last_action >= WARN_PERIOD:
+            self._tick(act=False)
 
     def _warn(self, key: str, text: str) -> None:
         now = time.monotonic()
@@ -163,7 +196,8 @@ class PolicyNode(Node):
         return {topic: msg for topic, (msg, received) in self.latest.items()
                 if now - received <= limit or topic in self.standing}
 
-    def _tick(self) -> None:
+    def _tick(self, act: bool = True) -> None:
+        """Build the observations, name the agents that get no command and (``act``) command the others."""
         if not self.context.ok():
             return
         fresh = self.fresh_messages()
@@ -179,7 +213,7 @@ class PolicyNode(Node):
             for i, why in reasons.items():
                 self._warn(self.agent_names[i], f"no command for {self.agent_names[i]}: {why}")
         usable = np.array([i not in reasons for i in range(len(self.agent_names))])
-        if not usable.any():
+        if not act or not usable.any():
             return
         actions = self.policy.act(np.where(usable[:, None], obs, 0.0)[None])[0]
         self.publish(actions, usable, yaw)
