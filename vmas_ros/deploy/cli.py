@@ -16,10 +16,12 @@ import math
 import shlex
 import sys
 from pathlib import Path
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional
 
 import numpy as np
 import yaml
+
+from vmas_ros.ros.params import ACT_ON
 
 #: scenario -> the shipped adapter that rebuilds its observation (vmas_ros.adapters.ADAPTER_NAMES)
 ADAPTER_OF = {"simple_spread": "simple_spread", "navigation": "navigation", "diff_drive": "diff_drive",
@@ -54,6 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "random where they never do (default auto)")
     parser.add_argument("--fleet-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="another robot_fleet parameter (repeatable)")
+    parser.add_argument("--act-on", choices=ACT_ON, default=None,
+                        help="when policy_node acts: timer, at 1 / the engine's dt; scan, as soon as every robot's "
+                             "new scan is in (policy_node's act_on; default timer)")
     parser.add_argument("--policy-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="another policy_node parameter (repeatable), e.g. lookahead:=0.2")
     parser.add_argument("--out", required=True, help="output folder")
@@ -114,6 +119,26 @@ def fleet_starts(starts: List[dict], mode: str, rng: np.random.Generator) -> Lis
     return out
 
 
+def act_on_of(option: Optional[str], extra: Dict[str, Any]) -> str:
+    """policy_node's ``act_on`` from ``--act-on`` or ``--policy-param act_on:=...`` (default timer).
+
+    Two different values are refused, so the report never names another mode than the one that ran.
+    """
+    given = extra.get("act_on")
+    if given is not None and option is not None and given != option:
+        raise ValueError(f"--act-on {option} and --policy-param act_on:={given} disagree; give one of them")
+    return option or given or "timer"
+
+
+def policy_node_params(policy_path: str, adapter: str, twist: bool, drive: str, scale: float, dt: float,
+                       act_on: str, extra: Dict[str, Any]) -> Dict[str, Any]:
+    """policy_node's parameters for the fleet run: body-frame cmd_vel through ``adapter`` at the engine's
+    rate (1 / ``dt``), acting on ``act_on``, then ``extra`` (``--policy-param``)."""
+    return {"policy_path": str(Path(policy_path).resolve()), "adapter": adapter, "output": "cmd_vel",
+            "use_stamped_cmd_vel": not twist, "base": drive, "cmd_vel_scale": scale, "rate_hz": 1.0 / dt,
+            **extra, "act_on": act_on}
+
+
 def _own_arguments() -> List[str]:
     """This command's arguments as typed (after ``deploy-eval``), for the report's heading."""
     argv = sys.argv[1:]
@@ -135,6 +160,7 @@ def _run(args: argparse.Namespace) -> int:
     seeds = parse_seeds(args.seeds)
     fleet_extra, policy_extra = parse_params(args.fleet_param, "--fleet-param"), parse_params(args.policy_param,
                                                                                                "--policy-param")
+    act_on = act_on_of(args.act_on, policy_extra)
     noise = [float(v) for v in args.odom_noise.split(",")]
     if len(noise) != 3 or min(noise) < 0:
         raise ValueError(f"--odom-noise must be three sigmas >= 0 (position, yaw, velocity), got {args.odom_noise!r}")
@@ -172,9 +198,8 @@ def _run(args: argparse.Namespace) -> int:
                     "velocity_lag": args.lag, "odom_noise_position": noise[0], "odom_noise_yaw": noise[1],
                     "odom_noise_velocity": noise[2], "end_on_goals": args.end_at_done, "seed": seeds[0],
                     **fleet_extra}
-    policy_params = {"policy_path": str(Path(args.policy).resolve()), "adapter": adapter or "",
-                     "output": "cmd_vel", "use_stamped_cmd_vel": not args.twist, "base": args.drive,
-                     "cmd_vel_scale": scale, "rate_hz": 1.0 / engine["dt"], **policy_extra}
+    policy_params = policy_node_params(args.policy, adapter or "", args.twist, args.drive, scale, engine["dt"],
+                                       act_on, policy_extra)
     starts = fleet_starts(engine["starts"], args.headings, np.random.default_rng(seeds[0]))
     command = "vmas-ros deploy-eval " + " ".join(shlex.quote(a) for a in _own_arguments())
 
@@ -185,13 +210,15 @@ def _run(args: argparse.Namespace) -> int:
         rows = report.pair_episodes(engine, summary, labels)
         found = report.totals(rows, engine["per_robot_goals"])
         heading = {"policy": args.policy, "scenario": scenario, "scenario_kwargs": json.dumps(kwargs),
-                   "command": command, "fleet": summary["parameters"],
-                   "policy_node": ", ".join(f"{k} {v}" for k, v in policy_params.items() if k != "policy_path")}
+                   "command": command, "fleet": summary["parameters"], "act_on": act_on,
+                   "policy_node": ", ".join(f"{k} {v}" for k, v in policy_params.items()
+                                          if k not in ("policy_path", "act_on"))}
         (folder / "report.json").write_text(json.dumps({"heading": heading, "rows": rows, "totals": found}, indent=1))
         text = report.markdown(rows, found, engine["per_robot_goals"], heading)
         (folder / "report.md").write_text(text)
         report.plot(rows, engine["per_robot_goals"], folder / "comparison.png",
-                    f"{scenario}: engine vs robot_fleet ({args.drive}, latency {latency} s, lag {args.lag} s)")
+                    f"{scenario}: engine vs robot_fleet ({args.drive}, latency {latency} s, lag {args.lag} s, "
+                    f"policy_node on {act_on})")
         print(text)
         return found
 
@@ -199,6 +226,6 @@ def _run(args: argparse.Namespace) -> int:
         fleet_report(out, args.latency)
         return 0
     text = sweep.run_sweep(out, latencies, fleet_report, policy=args.policy, command=command,
-                           per_robot_goals=engine["per_robot_goals"])
+                           per_robot_goals=engine["per_robot_goals"], act_on=act_on)
     print(text)
     return 0

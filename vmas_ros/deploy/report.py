@@ -15,7 +15,7 @@ from typing import Any, Dict, List, Optional
 #: the fleet parameters a table states: the conditions the policy met on the fleet
 CONDITIONS = ("drive", "use_stamped_cmd_vel", "command_latency", "velocity_lag", "odom_noise_position",
               "odom_noise_yaw", "odom_noise_velocity", "max_linear_speed", "max_angular_speed", "scan_rays",
-              "end_on_goals")
+              "scan_rate_hz", "end_on_goals")
 
 
 #: beyond this many episodes the plot numbers them instead of naming each
@@ -66,7 +66,7 @@ def markdown(rows: List[Dict[str, Any]], summary: Dict[str, Any], per_robot_goal
     lines = [f"- policy: `{heading['policy']}` ({heading['scenario']}, kwargs `{heading['scenario_kwargs']}`)",
              f"- command: `{heading['command']}`",
              "- fleet: " + ", ".join(f"{k} {heading['fleet'][k]}" for k in CONDITIONS if k in heading["fleet"]),
-             f"- policy_node: {heading['policy_node']}", ""]
+             f"- policy_node acts on: {heading.get('act_on', 'timer')}; parameters: {heading['policy_node']}", ""]
     columns = ["episode", "engine coverage (m)", "fleet coverage (m)", "ratio"]
     if per_robot_goals:
         columns += ["engine done at (s)", "fleet done at (s)"]
