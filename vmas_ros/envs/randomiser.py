@@ -22,7 +22,7 @@ so the same seed gives the same start states with and without it.
 from __future__ import annotations
 
 from functools import partial
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple, Union
 
 import torch
 from torch import Tensor
@@ -30,6 +30,7 @@ from torch import Tensor
 from vmas_ros.envs import sensor_noise
 from vmas_ros.envs.randomisation import HALF_UP, SETTINGS, Randomisation
 from vmas_ros.simulator.compiling import WorldKernel
+from vmas_ros.simulator.tracing import tracing
 
 __all__ = ["Randomiser", "SEED_OFFSET"]
 
@@ -163,14 +164,16 @@ class Randomiser:
         return executed
 
     # ------------------------------------------------------------- observations
-    def observations(self, obs: Tensor) -> Tensor:
-        """Every agent's observation ``[A, B, O]`` as a robot's sensors would give it (a new tensor)."""
-        layout, shape = self._layout, obs.shape
+    def observations(self, obs: Union[Tensor, Tuple[Tensor, ...]]):
+        """Every agent's observation ``[A, B, O]`` as a robot's sensors would give it (a new tensor); given
+        a tuple of ``[B, O]``, one per agent, a tuple of new ones."""
+        layout = self._layout
+        shape = obs.shape if isinstance(obs, Tensor) else (len(obs), *obs[0].shape)
         if self._projection is None or self._projection.shape[1] != shape[2]:
             if layout.width_needed() > shape[2]:
                 raise ValueError(f"the observation layout needs {layout.width_needed()} columns, but the "
                                  f"observations have {shape[2]}")
-            self._projection = _projection(layout, shape[2], obs)
+            self._projection = _projection(layout, shape[2], obs if isinstance(obs, Tensor) else obs[0])
             self._perturb = WorldKernel(self._env.world, partial(_perturbed, lidar=None if layout.lidar is None else (
                 layout.lidar.start, layout.lidar.count, float(layout.lidar.max_value), float(layout.lidar.miss))))
         noisy = self._perturb(obs, self._seed_key, self._step, self._pair_sigma, self._projection, self._lidar_sigma,
@@ -179,8 +182,9 @@ class Randomiser:
         return noisy
 
     def observation_list(self, obs: List[Tensor]) -> List[Tensor]:
-        """:meth:`observations` for one ``[B, O]`` tensor per agent."""
-        return list(self.observations(torch.stack(obs)).unbind(0))
+        """:meth:`observations` for one ``[B, O]`` tensor per agent (stacked and split inside the kernel,
+        where a compiled one reads and writes them in place of two more passes over the observations)."""
+        return list(self.observations(tuple(obs)))
 
 
 def _as_int32(value: int) -> int:
@@ -208,10 +212,11 @@ def _projection(layout, width: int, like: Tensor) -> Tensor:
     return matrix
 
 
-def _perturbed(obs: Tensor, seed_key: Tensor, step: Tensor, pair_sigma: Tensor, projection: Tensor,
-               lidar_sigma: Optional[Tensor], dropout: Optional[Tensor], lidar) -> Tensor:
+def _perturbed(obs, seed_key: Tensor, step: Tensor, pair_sigma: Tensor, projection: Tensor,
+               lidar_sigma: Optional[Tensor], dropout: Optional[Tensor], lidar):
     """``obs`` ``[A, B, O]`` as a robot's sensors would give it, with the random numbers of noise ``step``
-    (0-d int32) of the stream ``seed_key`` (see :mod:`~vmas_ros.envs.sensor_noise`).
+    (0-d int32) of the stream ``seed_key`` (see :mod:`~vmas_ros.envs.sensor_noise`); ``obs`` given as a
+    tuple of each agent's ``[B, O]`` gives a tuple back.
 
     Four normal errors per agent and env, times ``pair_sigma`` ``[A, B, 4]``, are the position and velocity
     errors, which ``projection`` ``[4, O]`` puts on every column that moves with them. Per lidar ray: a normal
@@ -219,11 +224,14 @@ def _perturbed(obs: Tensor, seed_key: Tensor, step: Tensor, pair_sigma: Tensor, 
     A ray that saw nothing still sees nothing; the others stay in the sensor's range. A pure function
     of its arguments: it compiles with the world's physics.
     """
+    if not isinstance(obs, Tensor):
+        return _perturbed(torch.stack(obs), seed_key, step, pair_sigma, projection, lidar_sigma, dropout,
+                          lidar).unbind(0)
     n_agents, n_envs, _ = obs.shape
     rays = 0 if lidar is None else lidar[1]
     numbers = sensor_noise.hashes(sensor_noise.stream_key(seed_key, step), (n_agents, n_envs, 4 + rays))
     errors = sensor_noise.normals(numbers[..., :4], obs.dtype) * pair_sigma
-    if torch.compiler.is_compiling():  # four broadcast products fuse with the rest
+    if tracing():  # four broadcast products fuse with the rest
         noisy = obs + (errors.unsqueeze(-1) * projection).sum(dim=-2)
     else:  # one matmul is the cheaper eager call
         noisy = torch.addmm(obs.reshape(-1, obs.shape[-1]), errors.reshape(-1, 4), projection).view(obs.shape)
