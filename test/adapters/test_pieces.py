@@ -12,7 +12,7 @@ from nav_msgs.msg import Odometry
 
 from test.adapters.robot_messages import scan_message
 from vmas_ros.adapters.pieces import (
-    ScanResampler, odometry_state, pose_array_positions, pose_position, read_odometry,
+    ScanResampler, inflate, margin_problem, odometry_state, pose_array_positions, pose_position, read_odometry,
 )
 from vmas_ros.ros import convert
 from vmas_ros.simulator import env_snapshot
@@ -167,6 +167,58 @@ def test_nan_readings_take_a_near_neighbour_or_spoil_the_rays():
     rays, problem = training_lidar().resample(full_scan(ranges))
     assert rays is None
     assert problem == "NaN readings with no valid scan ray within 0.262 rad for training rays [1]"
+
+
+def margin_scan():
+    """Hits and misses on the twelve training rays (ray k at 30 k degrees), range_min 0.015, range_max 3.0."""
+    ranges = np.full(360, np.inf)  # ray 11 reads +inf: nothing in view
+    for k, reading in enumerate([0.10, 0.03, 0.37, 0.45, -np.inf, 0.01, 3.2, 0.35, 0.3499, 0.2, 0.0151]):
+        ranges[(180 + 30 * k) % 360] = reading
+    return full_scan(ranges, range_min=0.015, range_max=3.0)
+
+
+#: proximities (0.35 - distance) of margin_scan's rays without a margin (LaserScan ranges are float32: compare to 1e-6)
+PLAIN = [0.25, 0.32, 0, 0, 0, 0, 0, 0, 0.0001, 0.15, 0.3349, 0]
+
+
+def test_a_margin_reads_every_return_closer_and_leaves_no_return_alone():
+    plain, problem = training_lidar().resample(margin_scan())
+    assert problem is None
+    np.testing.assert_allclose(plain, PLAIN, atol=1e-6)
+    same, _ = training_lidar(margin=0.0).resample(margin_scan())
+    np.testing.assert_array_equal(same, plain)  # margin 0: bit for bit the reading without one
+    rays, problem = training_lidar(margin=0.05).resample(margin_scan())
+    assert problem is None
+    # hits 0.05 m closer: 0.10 -> 0.05; 0.03 -> 0 (clamped: contact); 0.37, beyond the training range, comes into
+    # view at 0.32; 0.45 stays out of view; -inf, below range_min, above range_max and +inf stay no return;
+    # 0.35 and 0.3499, at the range's edge, now read 0.30 and 0.2999
+    expected = [0.30, 0.35, 0.03, 0, 0, 0, 0, 0.05, 0.0501, 0.20, 0.35, 0]
+    np.testing.assert_allclose(rays, expected, atol=1e-6)
+    distances, _ = training_lidar(margin=0.05, encoding="distance").resample(margin_scan())
+    np.testing.assert_allclose(distances, 0.35 - np.asarray(expected), atol=1e-6)
+    assert (rays >= np.asarray(PLAIN)).all() and rays.max() == pytest.approx(0.35)  # never farther, never past 0
+
+
+def test_inflate_moves_distances_closer_down_to_zero():
+    np.testing.assert_allclose(inflate(np.array([0.3, 0.05, 0.0, np.inf]), 0.08), [0.22, 0.0, 0.0, np.inf])
+    values = np.array([0.3, -1.0])
+    assert inflate(values, 0.0) is values
+
+
+@pytest.mark.parametrize("margin, problem", [
+    (-0.01, "margin must be >= 0 m and below the training lidar's range 0.35 m, got -0.01"),
+    (0.35, "margin must be >= 0 m and below the training lidar's range 0.35 m, got 0.35"),
+    (math.nan, "margin must be a finite number of metres, got nan"),
+    (math.inf, "margin must be a finite number of metres, got inf"),
+    ("0.05", "margin must be a finite number of metres, got '0.05'"),
+    (True, "margin must be a finite number of metres, got True"),
+])
+def test_a_margin_that_is_not_a_distance_is_refused(margin, problem):
+    assert margin_problem(margin, 0.35) == problem
+    with pytest.raises(ValueError) as error:
+        training_lidar(margin=margin)
+    assert str(error.value) == problem
+    assert margin_problem(0.0, 0.35) is None and margin_problem(np.float32(0.1), 0.35) is None
 
 
 REFUSALS = [

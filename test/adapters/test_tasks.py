@@ -146,6 +146,57 @@ def test_navigation_adapter_treats_nan_readings_by_the_scan_rules():
     assert "training rays [0]" in adapter.problems["agent_0"]
 
 
+@pytest.mark.parametrize("dynamics", ["holonomic", "diff_drive"])
+def test_navigation_adapter_scan_margin_brings_only_the_lidar_closer(dynamics):
+    env, obs = stepped("navigation", crowd=0.5, dynamics=dynamics)
+    size, margin = obs[0].shape[1], 0.05
+    plain = NavigationAdapter(rm.names(env), size, dynamics=dynamics, scan_margin=0.0)
+    inflated = NavigationAdapter(rm.names(env), size, dynamics=dynamics, scan_margin=margin)
+    assert plain.scan_margin == 0.0 and inflated.resampler.margin == margin
+    closer = 0
+    for index in range(env.num_envs):
+        latest, wanted = rm.robot_messages(env, index), rm.expected(obs, index)
+        np.testing.assert_allclose(plain.build(latest), wanted, atol=ATOL)  # margin 0: the engine's observation
+        built = inflated.build(latest)
+        assert inflated.problems == {}
+        np.testing.assert_array_equal(built[:, :-12], plain.build(latest)[:, :-12])  # the rest is untouched
+        rays, seen = built[:, -12:], wanted[:, -12:]
+        hits = seen > 0
+        np.testing.assert_allclose(rays[hits], np.minimum(seen[hits] + margin, 0.35), atol=ATOL)
+        # no return within the training range: free, or a neighbour less than the margin beyond it
+        assert ((rays[~hits] >= 0) & (rays[~hits] < margin + ATOL)).all()
+        closer += int(hits.sum())
+    assert closer >= 3, "the agents must see each other for the margin to show"
+
+
+def test_navigation_adapter_refuses_a_margin_that_is_no_distance():
+    agents = ["agent_0", "agent_1"]
+    for margin, problem in [(-0.05, "scan_margin must be >= 0 m and below the training lidar's range 0.35 m, got "
+                                     "-0.05"),
+                            (math.nan, "scan_margin must be a finite number of metres, got nan"),
+                            (math.inf, "scan_margin must be a finite number of metres, got inf"),
+                            (5, "scan_margin must be >= 0 m and below the training lidar's range 0.35 m, got 5")]:
+        with pytest.raises(ValueError) as error:
+            NavigationAdapter(agents, 18, scan_margin=margin)
+        assert str(error.value) == problem
+        with pytest.raises(ValueError) as error:
+            load_adapter("navigation", agents, 18, {"scan_margin": margin})
+        assert str(error.value) == f"adapter 'navigation' refused its arguments: {problem}"
+    assert NavigationAdapter(agents, 18, lidar_range=0.6, scan_margin=0.4).resampler.margin == 0.4
+
+
+def test_scan_margin_reaches_the_adapter_from_policy_nodes_parameters():
+    """policy_node builds its adapter from ``adapter_kwargs`` (a YAML-flow string) as here."""
+    from vmas_ros.ros.params import PolicyNodeParams, validate_policy_node
+
+    text = "{scan_margin: 0.08}"
+    assert validate_policy_node("adapter_kwargs", text) is None
+    params = PolicyNodeParams(adapter="navigation", adapter_kwargs=text)
+    adapter = load_adapter(params.adapter, ["agent_0", "agent_1"], 18, params.kwargs(), {"n_agents": 2})
+    assert adapter.scan_margin == 0.08 and adapter.resampler.margin == 0.08
+    assert load_adapter("navigation", ["agent_0", "agent_1"], 18, PolicyNodeParams().kwargs()).resampler.margin == 0
+
+
 # ---------------------------------------------------------------- simple_spread
 @pytest.mark.parametrize("n_agents,obs_agents", [(3, True), (2, False)])
 def test_simple_spread_adapter_rebuilds_the_observation(n_agents, obs_agents):

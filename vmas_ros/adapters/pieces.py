@@ -14,13 +14,14 @@ robot's body). A LaserScan is in the robot's body frame, ray ``i`` at
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
 __all__ = [
-    "ANGLE_TOLERANCE", "ENCODINGS", "FRAMES", "ScanResampler", "odometry_state", "pose_array_positions",
-    "pose_position", "read_odometry",
+    "ANGLE_TOLERANCE", "ENCODINGS", "FRAMES", "ScanResampler", "inflate", "margin_problem", "odometry_state",
+    "pose_array_positions", "pose_position", "read_odometry",
 ]
 
 TWO_PI = 2 * math.pi
@@ -95,6 +96,31 @@ def pose_array_positions(msg, expected: Optional[int] = None) -> Tuple[Optional[
 
 
 # ---------------------------------------------------------------------- scans
+def margin_problem(margin, max_range: Optional[float] = None, name: str = "margin") -> Optional[str]:
+    """Why ``margin`` is no safety margin for a lidar of range ``max_range`` (None: any range), or None.
+
+    A margin is a finite number of metres, at least 0 and below ``max_range``
+    (one as long as the range would show every neighbour in view as touching:
+    a unit mistake, centimetres for metres).
+    """
+    if isinstance(margin, bool) or not isinstance(margin, numbers.Real) or not math.isfinite(margin):
+        return f"{name} must be a finite number of metres, got {margin!r}"
+    if max_range is None:
+        return None if margin >= 0 else f"{name} must be >= 0 m, got {margin!r}"
+    if not 0 <= margin < max_range:
+        return f"{name} must be >= 0 m and below the training lidar's range {max_range:g} m, got {margin!r}"
+    return None
+
+
+def inflate(distances: np.ndarray, margin: float) -> np.ndarray:
+    """``distances`` (m) ``margin`` closer, none below 0; a margin of 0 gives them back unchanged.
+
+    A costmap's inflation radius, for a policy's lidar: everything seen reads
+    that much nearer, so the policy keeps that much more room.
+    """
+    return np.maximum(distances - margin, 0.0) if margin else distances
+
+
 def _angle_gap(a, b) -> np.ndarray:
     """|a - b| on the circle, in [0, pi]."""
     return np.abs(np.remainder(np.asarray(a) - b + math.pi, TWO_PI) - math.pi)
@@ -113,7 +139,9 @@ class ScanResampler:
     the world and the scan is read at the training angles minus the robot's
     heading. ``encoding``: ``"proximity"`` gives ``max_range - distance``, 0
     for no return (navigation's observation); ``"distance"`` the distance,
-    ``max_range`` for no return (the raw ``Lidar.measure()``).
+    ``max_range`` for no return (the raw ``Lidar.measure()``). ``margin``
+    (m, default 0): a safety margin, every return read that much closer
+    (:func:`inflate`).
 
     Rules, in :meth:`resample`:
 
@@ -125,6 +153,12 @@ class ScanResampler:
       neighbour closer than the scanner's ``range_min`` therefore reads as
       free space: mind it on robots whose ``range_min`` exceeds the gap the
       policy must see.
+    * With a ``margin``, every return the scanner vouches for (within its
+      ``range_min`` and ``range_max``) is read ``margin`` closer, clamped at
+      0, before it is compared with ``max_range``: a neighbour up to
+      ``max_range + margin`` away comes into view at the edge of the
+      training range, as it would if it were ``margin`` larger. No return
+      stays no return.
     * NaN is a missing reading: the ray reads the nearest non-NaN scan ray
       within half the training rays' spacing instead; with none there, the
       observation cannot be built.
@@ -133,11 +167,12 @@ class ScanResampler:
     """
 
     def __init__(self, n_rays: int, max_range: float, angle_start: float = 0.0, angle_end: float = TWO_PI,
-                 frame: str = "body", encoding: str = "proximity", mount_yaw: float = 0.0) -> None:
+                 frame: str = "body", encoding: str = "proximity", mount_yaw: float = 0.0,
+                 margin: float = 0.0) -> None:
         if isinstance(n_rays, bool) or not isinstance(n_rays, int) or n_rays < 1:
             raise ValueError(f"n_rays must be an int >= 1, got {n_rays!r}")
-        numbers = {"max_range": max_range, "angle_start": angle_start, "angle_end": angle_end, "mount_yaw": mount_yaw}
-        for name, value in numbers.items():
+        finite = {"max_range": max_range, "angle_start": angle_start, "angle_end": angle_end, "mount_yaw": mount_yaw}
+        for name, value in finite.items():
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
         if not max_range > 0:
@@ -146,7 +181,10 @@ class ScanResampler:
             raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
         if encoding not in ENCODINGS:
             raise ValueError(f"encoding must be one of {', '.join(ENCODINGS)}, got {encoding!r}")
-        self.n_rays, self.max_range = n_rays, float(max_range)
+        problem = margin_problem(margin, float(max_range))
+        if problem:
+            raise ValueError(problem)
+        self.n_rays, self.max_range, self.margin = n_rays, float(max_range), float(margin)
         self.frame, self.encoding, self.mount_yaw = frame, encoding, float(mount_yaw)
         # the engine's rule for a full circle, so the rays sit where its Lidar puts them
         self.full_circle = (angle_start - angle_end) % TWO_PI < 1e-5
@@ -236,8 +274,9 @@ class ScanResampler:
                 window = (self.spacing or 0.0) / 2
                 return None, (f"NaN readings with no valid scan ray within {window:.3f} rad for training rays "
                               f"{still.tolist()}")
-        hit = (readings >= float(scan.range_min)) & (readings <= min(float(scan.range_max), self.max_range))
-        distances = np.where(hit, readings, self.max_range)
+        seen = (readings >= float(scan.range_min)) & (readings <= float(scan.range_max))
+        nearer = inflate(readings, self.margin)
+        distances = np.where(seen & (nearer <= self.max_range), nearer, self.max_range)
         return (self.max_range - distances if self.encoding == "proximity" else distances), None
 
     @staticmethod

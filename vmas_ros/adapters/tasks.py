@@ -21,7 +21,9 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set
 import numpy as np
 
 from vmas_ros.adapters.base import ObservationAdapter, agent_topic
-from vmas_ros.adapters.pieces import ScanResampler, pose_array_positions, pose_position, read_odometry
+from vmas_ros.adapters.pieces import (
+    ScanResampler, margin_problem, pose_array_positions, pose_position, read_odometry,
+)
 
 __all__ = ["DiffDriveAdapter", "GoalAdapter", "NavigationAdapter", "SimpleSpreadAdapter"]
 
@@ -199,6 +201,10 @@ class NavigationAdapter(_OdometryAdapter):
     heading. ``scan_yaw`` is the scanner's yaw on the robot (0: it faces
     forward). The training lidar sees only the other agents: walls or
     furniture in a real scan appear as neighbours to the policy.
+    ``scan_margin`` (m, 0: none) is a safety margin, as a costmap's
+    inflation radius: every return of the scan is read that much closer
+    (clamped at 0; no return stays no return), so the policy keeps that
+    much more room from what it sees.
 
     Kwargs: ``dynamics`` (``"holonomic"``), ``n_lidar_rays`` (default: what
     the observation size leaves; 0 for a task without collisions),
@@ -206,13 +212,15 @@ class NavigationAdapter(_OdometryAdapter):
     size), ``observe_all_goals`` (False), ``odom_topic``
     (``"{agent}/odom"``), ``scan_topic`` (``"{agent}/scan"``), ``goal_topic``
     (``"{agent}/goal"``, geometry_msgs/PoseStamped in the odometry's frame),
-    ``scan_yaw`` (0.0). A size that does not fit is a ValueError.
+    ``scan_yaw`` (0.0), ``scan_margin`` (0.0). A size that does not fit, or
+    a margin that is negative, not finite or not below ``lidar_range``, is a
+    ValueError.
     """
 
     def __init__(self, agents: Sequence[str], observation_size: int, dynamics: str = "holonomic",
                  n_lidar_rays: Optional[int] = None, lidar_range: float = 0.35, observe_all_goals: bool = False,
                  odom_topic: str = ODOM_TOPIC, scan_topic: str = SCAN_TOPIC, goal_topic: str = GOAL_TOPIC,
-                 scan_yaw: float = 0.0) -> None:
+                 scan_yaw: float = 0.0, scan_margin: float = 0.0) -> None:
         super().__init__(agents, observation_size, odom_topic)
         if dynamics not in NAVIGATION_DYNAMICS:
             raise ValueError(f"dynamics must be one of {', '.join(NAVIGATION_DYNAMICS)}, got {dynamics!r}")
@@ -237,11 +245,15 @@ class NavigationAdapter(_OdometryAdapter):
                              f"n_lidar_rays={n_lidar_rays}: {layout} = {self.fixed + n_lidar_rays}")
         if isinstance(lidar_range, bool) or not isinstance(lidar_range, numbers.Real) or not 0 < lidar_range < np.inf:
             raise ValueError(f"lidar_range must be a finite number > 0, got {lidar_range!r}")
-        self.n_lidar_rays = n_lidar_rays
+        problem = margin_problem(scan_margin, float(lidar_range), "scan_margin")
+        if problem:
+            raise ValueError(problem)
+        self.n_lidar_rays, self.scan_margin = n_lidar_rays, float(scan_margin)
         self.resampler = None
         if n_lidar_rays:
             frame = "body" if dynamics == "diff_drive" else "world"
-            self.resampler = ScanResampler(n_lidar_rays, float(lidar_range), frame=frame, mount_yaw=scan_yaw)
+            self.resampler = ScanResampler(n_lidar_rays, float(lidar_range), frame=frame, mount_yaw=scan_yaw,
+                                           margin=self.scan_margin)
         self.goal_topics = [agent_topic(goal_topic, a, self.agents, "goal_topic") for a in self.agents]
         self.scan_topics = [agent_topic(scan_topic, a, self.agents, "scan_topic") for a in self.agents]
 

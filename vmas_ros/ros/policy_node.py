@@ -106,8 +106,10 @@ class PolicyNode(Node):
         else:
             self._timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
             when = f"at {self.params.rate_hz} Hz"
+        given = self.params.kwargs()
+        adapter = f" (adapter {self.params.adapter}, adapter_kwargs {given})" if given else ""
         self.get_logger().info(
-            f"policy_node: {self.policy!r} for {self.agent_names}, reading {sorted(topics)}, "
+            f"policy_node: {self.policy!r} for {self.agent_names}, reading {sorted(topics)}{adapter}, "
             f"publishing {self.output.type_name} on <agent>/{self.output.topic} {when}" + self._command_note(why)
         )
 
