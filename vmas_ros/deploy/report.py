@@ -66,7 +66,10 @@ def markdown(rows: List[Dict[str, Any]], summary: Dict[str, Any], per_robot_goal
     lines = [f"- policy: `{heading['policy']}` ({heading['scenario']}, kwargs `{heading['scenario_kwargs']}`)",
              f"- command: `{heading['command']}`",
              "- fleet: " + ", ".join(f"{k} {heading['fleet'][k]}" for k in CONDITIONS if k in heading["fleet"]),
-             f"- policy_node acts on: {heading.get('act_on', 'timer')}; parameters: {heading['policy_node']}", ""]
+             f"- policy_node acts on: {heading.get('act_on', 'timer')}; parameters: {heading['policy_node']}"]
+    if heading.get("scan_margin") is not None:
+        lines.append(margin_line(heading["scan_margin"]))
+    lines.append("")
     columns = ["episode", "engine coverage (m)", "fleet coverage (m)", "ratio"]
     if per_robot_goals:
         columns += ["engine done at (s)", "fleet done at (s)"]
@@ -91,6 +94,11 @@ def markdown(rows: List[Dict[str, Any]], summary: Dict[str, Any], per_robot_goal
     lines.append(f"Collisions per episode: engine {s['engine_collisions_per_episode']:.2f}, "
                  f"fleet {s['fleet_collisions_per_episode']:.2f}.")
     return "\n".join(lines) + "\n"
+
+
+def margin_line(margin: float) -> str:
+    """The report line that states the navigation adapter's scan margin of the fleet run."""
+    return f"- scan margin: {margin:g} m (the navigation adapter's scan_margin: scan returns read that much closer)"
 
 
 def plot(rows: List[Dict[str, Any]], per_robot_goals: bool, path, title: str) -> bool:
