@@ -12,7 +12,7 @@ from nav_msgs.msg import Odometry
 
 from test.adapters.robot_messages import scan_message
 from vmas_ros.adapters.pieces import (
-    ScanResampler, inflate, margin_problem, odometry_state, pose_array_positions, pose_position, read_odometry,
+    ScanResampler, closing_margins, inflate, lead_problem, margin_problem, odometry_state, pose_array_positions, pose_position, read_odometry,
 )
 from vmas_ros.ros import convert
 from vmas_ros.simulator import env_snapshot
@@ -203,6 +203,8 @@ def test_inflate_moves_distances_closer_down_to_zero():
     np.testing.assert_allclose(inflate(np.array([0.3, 0.05, 0.0, np.inf]), 0.08), [0.22, 0.0, 0.0, np.inf])
     values = np.array([0.3, -1.0])
     assert inflate(values, 0.0) is values
+    np.testing.assert_allclose(inflate(np.array([0.3, 0.3, 0.3]), np.array([0.0, 0.1, 0.5])), [0.3, 0.2, 0.0])
+    assert inflate(values, np.zeros(2)) is values
 
 
 @pytest.mark.parametrize("margin, problem", [
@@ -219,6 +221,57 @@ def test_a_margin_that_is_not_a_distance_is_refused(margin, problem):
         training_lidar(margin=margin)
     assert str(error.value) == problem
     assert margin_problem(0.0, 0.35) is None and margin_problem(np.float32(0.1), 0.35) is None
+
+
+
+def test_closing_margins_count_only_the_speed_towards_each_ray():
+    angles = np.array([0.0, math.pi / 3, math.pi / 2, math.pi, -math.pi / 2])
+    margins = closing_margins(angles, (0.2, 0.0), 0.3)  # 0.2 m/s along +x, 0.3 s ahead
+    np.testing.assert_allclose(margins, [0.06, 0.03, 0.0, 0.0, 0.0], atol=1e-12)  # across or away: no margin
+    np.testing.assert_allclose(closing_margins(angles, (0.0, -0.1), 0.5), [0, 0, 0, 0, 0.05], atol=1e-12)
+    assert not closing_margins(angles, (0.2, 0.0), 0.0).any()
+
+
+def test_a_lead_reads_the_rays_ahead_closer_by_the_speed_towards_them():
+    wall = full_scan(np.full(360, 0.2))  # every ray meets something 0.2 m away
+    still, _ = training_lidar(frame="world").resample(wall, 0.0)
+    np.testing.assert_allclose(still, 0.15, atol=1e-6)
+    lead = training_lidar(frame="world", lead=0.3)
+    np.testing.assert_array_equal(lead.resample(wall, 0.0)[0], still)  # no velocity: standing still
+    np.testing.assert_array_equal(lead.resample(wall, 0.0, (0.0, 0.0))[0], still)
+    moving, problem = lead.resample(wall, 1.0, (0.2, 0.0))  # world rays: the heading does not turn them
+    assert problem is None
+    ahead = 0.06 * np.maximum(np.cos(np.radians(30 * np.arange(12))), 0.0)
+    np.testing.assert_allclose(moving, 0.15 + ahead, atol=1e-6)
+    assert moving[0] == pytest.approx(0.21, abs=1e-6) and (moving[3:10] == still[3:10]).all()
+    fast, _ = lead.resample(wall, 0.0, (2.0, 0.0))  # 0.6 m of lead: contact ahead, clamped at 0 m
+    assert fast[0] == pytest.approx(0.35) and fast[6] == pytest.approx(0.15, abs=1e-6)
+    with_margin, _ = training_lidar(frame="world", lead=0.3, margin=0.02).resample(wall, 0.0, (0.2, 0.0))
+    np.testing.assert_allclose(with_margin, np.minimum(0.17 + ahead, 0.35), atol=1e-6)  # the two add up
+
+
+def test_a_body_frame_lead_turns_the_rays_with_the_heading():
+    wall = full_scan(np.full(360, 0.2))
+    lead = training_lidar(frame="body", lead=0.3)
+    rays, _ = lead.resample(wall, math.pi / 2, (0.0, 0.2))  # facing +y, driving forward at 0.2 m/s
+    assert rays[0] == pytest.approx(0.21, abs=1e-6)  # the forward ray, whatever the world direction
+    assert rays[6] == pytest.approx(0.15, abs=1e-6) and rays[3] == pytest.approx(0.15, abs=1e-6)
+    np.testing.assert_allclose(lead.world_angles(math.pi / 2), lead.angles + math.pi / 2)
+
+
+@pytest.mark.parametrize("lead, problem", [
+    (-0.1, "lead must be >= 0 s, got -0.1"),
+    (math.nan, "lead must be a finite number of seconds, got nan"),
+    (math.inf, "lead must be a finite number of seconds, got inf"),
+    ("0.3", "lead must be a finite number of seconds, got '0.3'"),
+    (False, "lead must be a finite number of seconds, got False"),
+])
+def test_a_lead_that_is_not_a_time_is_refused(lead, problem):
+    assert lead_problem(lead) == problem
+    with pytest.raises(ValueError) as error:
+        training_lidar(lead=lead)
+    assert str(error.value) == problem
+    assert lead_problem(0.0) is None and lead_problem(np.float64(0.3)) is None
 
 
 REFUSALS = [

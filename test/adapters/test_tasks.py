@@ -169,6 +169,33 @@ def test_navigation_adapter_scan_margin_brings_only_the_lidar_closer(dynamics):
     assert closer >= 3, "the agents must see each other for the margin to show"
 
 
+
+@pytest.mark.parametrize("dynamics", ["holonomic", "diff_drive"])
+def test_navigation_adapter_scan_lead_reads_closer_what_the_robot_drives_at(dynamics):
+    env, obs = stepped("navigation", crowd=0.5, dynamics=dynamics)
+    size, lead = obs[0].shape[1], 0.5
+    plain = NavigationAdapter(rm.names(env), size, dynamics=dynamics)
+    leading = NavigationAdapter(rm.names(env), size, dynamics=dynamics, scan_lead=lead)
+    assert plain.scan_lead == 0.0 and leading.resampler.lead == lead
+    grown = 0
+    for index in range(env.num_envs):
+        latest = rm.robot_messages(env, index)
+        before, after = plain.build(latest), leading.build(latest)
+        assert leading.problems == {}
+        np.testing.assert_array_equal(after[:, :-12], before[:, :-12])  # the rest is untouched
+        for i, agent in enumerate(env.agents):
+            yaw = float(agent.state.rot[index]) if dynamics == "diff_drive" else 0.0
+            velocity = agent.state.vel[index].numpy()
+            angles = leading.resampler.world_angles(yaw)
+            extra = lead * np.maximum(velocity[0] * np.cos(angles) + velocity[1] * np.sin(angles), 0.0)
+            hits = before[i, -12:] > 0
+            np.testing.assert_allclose(after[i, -12:][hits], np.minimum(before[i, -12:][hits] + extra[hits], 0.35),
+                                       atol=ATOL)
+            assert (after[i, -12:] >= before[i, -12:] - ATOL).all()
+            grown += int((after[i, -12:] > before[i, -12:] + 1e-4).sum())
+    assert grown >= 2, "some agent must drive towards a neighbour it sees for the lead to show"
+
+
 def test_navigation_adapter_refuses_a_margin_that_is_no_distance():
     agents = ["agent_0", "agent_1"]
     for margin, problem in [(-0.05, "scan_margin must be >= 0 m and below the training lidar's range 0.35 m, got "
@@ -183,6 +210,11 @@ def test_navigation_adapter_refuses_a_margin_that_is_no_distance():
             load_adapter("navigation", agents, 18, {"scan_margin": margin})
         assert str(error.value) == f"adapter 'navigation' refused its arguments: {problem}"
     assert NavigationAdapter(agents, 18, lidar_range=0.6, scan_margin=0.4).resampler.margin == 0.4
+    for lead, problem in [(-1, "scan_lead must be >= 0 s, got -1"),
+                          (math.nan, "scan_lead must be a finite number of seconds, got nan")]:
+        with pytest.raises(ValueError) as error:
+            load_adapter("navigation", agents, 18, {"scan_lead": lead})
+        assert str(error.value) == f"adapter 'navigation' refused its arguments: {problem}"
 
 
 def test_scan_margin_reaches_the_adapter_from_policy_nodes_parameters():

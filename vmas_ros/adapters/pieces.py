@@ -20,8 +20,8 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 __all__ = [
-    "ANGLE_TOLERANCE", "ENCODINGS", "FRAMES", "ScanResampler", "inflate", "margin_problem", "odometry_state",
-    "pose_array_positions", "pose_position", "read_odometry",
+    "ANGLE_TOLERANCE", "ENCODINGS", "FRAMES", "ScanResampler", "inflate", "lead_problem", "margin_problem",
+    "odometry_state", "pose_array_positions", "pose_position", "read_odometry",
 ]
 
 TWO_PI = 2 * math.pi
@@ -112,13 +112,32 @@ def margin_problem(margin, max_range: Optional[float] = None, name: str = "margi
     return None
 
 
-def inflate(distances: np.ndarray, margin: float) -> np.ndarray:
+def lead_problem(lead, name: str = "lead") -> Optional[str]:
+    """Why ``lead`` is no look-ahead time for a scan's margin, or None: it must be a finite number of seconds >= 0."""
+    if isinstance(lead, bool) or not isinstance(lead, numbers.Real) or not math.isfinite(lead):
+        return f"{name} must be a finite number of seconds, got {lead!r}"
+    return None if lead >= 0 else f"{name} must be >= 0 s, got {lead!r}"
+
+
+def inflate(distances: np.ndarray, margin) -> np.ndarray:
     """``distances`` (m) ``margin`` closer, none below 0; a margin of 0 gives them back unchanged.
 
-    A costmap's inflation radius, for a policy's lidar: everything seen reads
-    that much nearer, so the policy keeps that much more room.
+    ``margin``: one margin for every distance, or one per distance (the same
+    shape). A costmap's inflation radius, for a policy's lidar: everything
+    seen reads that much nearer, so the policy keeps that much more room.
     """
-    return np.maximum(distances - margin, 0.0) if margin else distances
+    return np.maximum(distances - margin, 0.0) if np.any(margin) else distances
+
+
+def closing_margins(ray_angles: np.ndarray, velocity, lead: float) -> np.ndarray:
+    """Per ray, the distance the robot closes along it within ``lead`` seconds: ``lead x max(0, v . u)``.
+
+    ``ray_angles`` [R]: the rays' directions in the world frame (rad);
+    ``velocity`` (2,): the robot's world-frame velocity (m/s). A ray the robot
+    moves away from, or across, gets 0. Returns [R] metres.
+    """
+    vx, vy = float(velocity[0]), float(velocity[1])
+    return lead * np.maximum(vx * np.cos(ray_angles) + vy * np.sin(ray_angles), 0.0)
 
 
 def _angle_gap(a, b) -> np.ndarray:
@@ -141,7 +160,11 @@ class ScanResampler:
     for no return (navigation's observation); ``"distance"`` the distance,
     ``max_range`` for no return (the raw ``Lidar.measure()``). ``margin``
     (m, default 0): a safety margin, every return read that much closer
-    (:func:`inflate`).
+    (:func:`inflate`). ``lead`` (s, default 0): a margin that grows with
+    speed, as a velocity obstacle's time horizon: each ray's return also
+    reads ``lead`` times the robot's speed towards that ray closer
+    (:func:`closing_margins`), which covers what the robot will travel
+    before its command takes effect.
 
     Rules, in :meth:`resample`:
 
@@ -158,7 +181,8 @@ class ScanResampler:
       0, before it is compared with ``max_range``: a neighbour up to
       ``max_range + margin`` away comes into view at the edge of the
       training range, as it would if it were ``margin`` larger. No return
-      stays no return.
+      stays no return. With a ``lead`` and the robot's velocity, each
+      ray's margin grows by ``lead x`` the speed towards that ray.
     * NaN is a missing reading: the ray reads the nearest non-NaN scan ray
       within half the training rays' spacing instead; with none there, the
       observation cannot be built.
@@ -168,7 +192,7 @@ class ScanResampler:
 
     def __init__(self, n_rays: int, max_range: float, angle_start: float = 0.0, angle_end: float = TWO_PI,
                  frame: str = "body", encoding: str = "proximity", mount_yaw: float = 0.0,
-                 margin: float = 0.0) -> None:
+                 margin: float = 0.0, lead: float = 0.0) -> None:
         if isinstance(n_rays, bool) or not isinstance(n_rays, int) or n_rays < 1:
             raise ValueError(f"n_rays must be an int >= 1, got {n_rays!r}")
         finite = {"max_range": max_range, "angle_start": angle_start, "angle_end": angle_end, "mount_yaw": mount_yaw}
@@ -181,10 +205,10 @@ class ScanResampler:
             raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
         if encoding not in ENCODINGS:
             raise ValueError(f"encoding must be one of {', '.join(ENCODINGS)}, got {encoding!r}")
-        problem = margin_problem(margin, float(max_range))
+        problem = margin_problem(margin, float(max_range)) or lead_problem(lead)
         if problem:
             raise ValueError(problem)
-        self.n_rays, self.max_range, self.margin = n_rays, float(max_range), float(margin)
+        self.n_rays, self.max_range, self.margin, self.lead = n_rays, float(max_range), float(margin), float(lead)
         self.frame, self.encoding, self.mount_yaw = frame, encoding, float(mount_yaw)
         # the engine's rule for a full circle, so the rays sit where its Lidar puts them
         self.full_circle = (angle_start - angle_end) % TWO_PI < 1e-5
@@ -247,11 +271,17 @@ class ScanResampler:
         turn = self.mount_yaw + (yaw if self.frame == "world" else 0.0)
         return self.angles - turn
 
-    def resample(self, scan, yaw: float = 0.0) -> Tuple[Optional[np.ndarray], Optional[str]]:
+    def world_angles(self, yaw: float) -> np.ndarray:
+        """The training rays' directions in the world frame [n_rays], for a robot heading ``yaw``."""
+        return self.angles + (yaw if self.frame == "body" else 0.0)
+
+    def resample(self, scan, yaw: float = 0.0, velocity=None) -> Tuple[Optional[np.ndarray], Optional[str]]:
         """The training readings ``[n_rays]`` (float64, in ``encoding``) from ``scan``, or None and the reason.
 
         ``yaw``: the robot's heading in the world (from its odometry), used
-        with ``frame="world"`` only.
+        with ``frame="world"``, and with a ``lead``. ``velocity``: its
+        world-frame velocity (vx, vy), m/s, for the ``lead``'s margins; None
+        reads as standing still.
         """
         ranges = np.asarray(scan.ranges, dtype=np.float64)
         problem = self.geometry_problem(scan, ranges.size)
@@ -275,7 +305,10 @@ class ScanResampler:
                 return None, (f"NaN readings with no valid scan ray within {window:.3f} rad for training rays "
                               f"{still.tolist()}")
         seen = (readings >= float(scan.range_min)) & (readings <= float(scan.range_max))
-        nearer = inflate(readings, self.margin)
+        margin = self.margin
+        if self.lead and velocity is not None:
+            margin = margin + closing_margins(self.world_angles(yaw), velocity, self.lead)
+        nearer = inflate(readings, margin)
         distances = np.where(seen & (nearer <= self.max_range), nearer, self.max_range)
         return (self.max_range - distances if self.encoding == "proximity" else distances), None
 

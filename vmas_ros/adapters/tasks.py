@@ -22,7 +22,7 @@ import numpy as np
 
 from vmas_ros.adapters.base import ObservationAdapter, agent_topic
 from vmas_ros.adapters.pieces import (
-    ScanResampler, margin_problem, pose_array_positions, pose_position, read_odometry,
+    ScanResampler, lead_problem, margin_problem, pose_array_positions, pose_position, read_odometry,
 )
 
 __all__ = ["DiffDriveAdapter", "GoalAdapter", "NavigationAdapter", "SimpleSpreadAdapter"]
@@ -204,7 +204,10 @@ class NavigationAdapter(_OdometryAdapter):
     ``scan_margin`` (m, 0: none) is a safety margin, as a costmap's
     inflation radius: every return of the scan is read that much closer
     (clamped at 0; no return stays no return), so the policy keeps that
-    much more room from what it sees.
+    much more room from what it sees. ``scan_lead`` (s, 0: none) adds, per
+    ray, the distance the robot's odometry velocity closes along that ray in
+    that time, so a fast approach reads nearer than a slow one: the room a
+    command needs before it takes effect on a robot with latency and lag.
 
     Kwargs: ``dynamics`` (``"holonomic"``), ``n_lidar_rays`` (default: what
     the observation size leaves; 0 for a task without collisions),
@@ -212,15 +215,16 @@ class NavigationAdapter(_OdometryAdapter):
     size), ``observe_all_goals`` (False), ``odom_topic``
     (``"{agent}/odom"``), ``scan_topic`` (``"{agent}/scan"``), ``goal_topic``
     (``"{agent}/goal"``, geometry_msgs/PoseStamped in the odometry's frame),
-    ``scan_yaw`` (0.0), ``scan_margin`` (0.0). A size that does not fit, or
-    a margin that is negative, not finite or not below ``lidar_range``, is a
+    ``scan_yaw`` (0.0), ``scan_margin`` (0.0), ``scan_lead`` (0.0). A size
+    that does not fit, a margin that is negative, not finite or not below
+    ``lidar_range``, or a lead that is negative or not finite, is a
     ValueError.
     """
 
     def __init__(self, agents: Sequence[str], observation_size: int, dynamics: str = "holonomic",
                  n_lidar_rays: Optional[int] = None, lidar_range: float = 0.35, observe_all_goals: bool = False,
                  odom_topic: str = ODOM_TOPIC, scan_topic: str = SCAN_TOPIC, goal_topic: str = GOAL_TOPIC,
-                 scan_yaw: float = 0.0, scan_margin: float = 0.0) -> None:
+                 scan_yaw: float = 0.0, scan_margin: float = 0.0, scan_lead: float = 0.0) -> None:
         super().__init__(agents, observation_size, odom_topic)
         if dynamics not in NAVIGATION_DYNAMICS:
             raise ValueError(f"dynamics must be one of {', '.join(NAVIGATION_DYNAMICS)}, got {dynamics!r}")
@@ -245,15 +249,15 @@ class NavigationAdapter(_OdometryAdapter):
                              f"n_lidar_rays={n_lidar_rays}: {layout} = {self.fixed + n_lidar_rays}")
         if isinstance(lidar_range, bool) or not isinstance(lidar_range, numbers.Real) or not 0 < lidar_range < np.inf:
             raise ValueError(f"lidar_range must be a finite number > 0, got {lidar_range!r}")
-        problem = margin_problem(scan_margin, float(lidar_range), "scan_margin")
+        problem = margin_problem(scan_margin, float(lidar_range), "scan_margin") or lead_problem(scan_lead, "scan_lead")
         if problem:
             raise ValueError(problem)
-        self.n_lidar_rays, self.scan_margin = n_lidar_rays, float(scan_margin)
+        self.n_lidar_rays, self.scan_margin, self.scan_lead = n_lidar_rays, float(scan_margin), float(scan_lead)
         self.resampler = None
         if n_lidar_rays:
             frame = "body" if dynamics == "diff_drive" else "world"
             self.resampler = ScanResampler(n_lidar_rays, float(lidar_range), frame=frame, mount_yaw=scan_yaw,
-                                           margin=self.scan_margin)
+                                           margin=self.scan_margin, lead=self.scan_lead)
         self.goal_topics = [agent_topic(goal_topic, a, self.agents, "goal_topic") for a in self.agents]
         self.scan_topics = [agent_topic(scan_topic, a, self.agents, "scan_topic") for a in self.agents]
 
@@ -311,7 +315,10 @@ class NavigationAdapter(_OdometryAdapter):
             return None
         if state is None and self.resampler.frame == "world":  # the heading is needed; the odometry's problem says why
             return None
-        rays, problem = self.resampler.resample(scan, 0.0 if state is None else float(state[2]))
+        if state is None:
+            rays, problem = self.resampler.resample(scan)
+        else:
+            rays, problem = self.resampler.resample(scan, float(state[2]), state[3:5])
         if rays is None:
             self.note(self.agents[i], f"{topic}: {problem}")
         return rays
