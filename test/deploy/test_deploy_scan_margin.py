@@ -22,7 +22,8 @@ from vmas_ros.ros.params import PolicyNodeParams, validate_policy_node
 
 def params(margin, extra=None):
     return deploy_cli.policy_node_params("p.json", "navigation", twist=False, drive="holonomic", scale=0.4, dt=0.1,
-                                         act_on="scan", extra=extra or {}, scan_margin=margin)
+                                         act_on="scan", extra=extra or {},
+                                         scan={} if margin is None else {"scan_margin": margin})
 
 
 def test_the_margin_goes_into_policy_nodes_adapter_kwargs():
@@ -122,5 +123,5 @@ def test_sweep_markdown_states_the_margin_only_where_there_is_one():
                                                          "fleet_success_rate": 1.0,
                                                          "engine_collisions_per_episode": 0.0,
                                                          "fleet_collisions_per_episode": 0.0}}])
-    assert "- scan margin: 0.05 m" in sweep.markdown(rows, "p", "c", scan_margin=0.05)
+    assert "- scan margin: 0.05 m" in sweep.markdown(rows, "p", "c", scan={"scan_margin": 0.05})
     assert "scan margin" not in sweep.markdown(rows, "p", "c")

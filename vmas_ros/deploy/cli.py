@@ -21,7 +21,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 import yaml
 
-from vmas_ros.adapters.pieces import margin_problem
+from vmas_ros.adapters.pieces import lead_problem, margin_problem
 from vmas_ros.ros.params import ACT_ON
 
 #: scenario -> the shipped adapter that rebuilds its observation (vmas_ros.adapters.ADAPTER_NAMES)
@@ -63,6 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scan-margin", type=float, default=None, metavar="M",
                         help="the navigation adapter's scan_margin, m: every scan return read that much closer, so "
                              "the policy keeps that much more room (default 0; the reports state it)")
+    parser.add_argument("--scan-lead", type=float, default=None, metavar="S",
+                        help="the navigation adapter's scan_lead, s: each ray's return also read closer by what the "
+                             "robot's odometry speed towards it covers in S seconds (default 0; the reports state it)")
     parser.add_argument("--policy-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="another policy_node parameter (repeatable), e.g. lookahead:=0.2")
     parser.add_argument("--out", required=True, help="output folder")
@@ -150,35 +153,48 @@ def adapter_kwargs_of(extra: Dict[str, Any]) -> Dict[str, Any]:
     return dict(given)
 
 
-def adapter_kwargs_with_margin(margin: Optional[float], extra: Dict[str, Any]) -> Dict[str, Any]:
-    """The adapter kwargs of the fleet run: ``--policy-param adapter_kwargs`` with ``--scan-margin`` in them.
+#: the navigation adapter's scan kwargs this command sets, with their options and how each is checked
+SCAN_OPTIONS = {"scan_margin": ("--scan-margin", lambda value, name: margin_problem(value, name=name)),
+                "scan_lead": ("--scan-lead", lead_problem)}
 
-    A margin that is negative or not finite is refused naming the option; so
-    are two different margins (``--scan-margin`` and ``adapter_kwargs``'
-    ``scan_margin``), so the report never names another one than ran.
+
+def scan_kwargs_of(args: argparse.Namespace) -> Dict[str, float]:
+    """``--scan-margin`` and ``--scan-lead`` as the adapter kwargs they set, the options not given left out."""
+    found = {"scan_margin": args.scan_margin, "scan_lead": args.scan_lead}
+    return {name: value for name, value in found.items() if value is not None}
+
+
+def adapter_kwargs_with_scan(scan: Dict[str, float], extra: Dict[str, Any]) -> Dict[str, Any]:
+    """The adapter kwargs of the fleet run: ``--policy-param adapter_kwargs`` with ``scan`` in them.
+
+    ``scan``: ``scan_margin`` and/or ``scan_lead`` from their options. A value
+    that is negative or not finite is refused naming its option; so is one
+    that disagrees with the same kwarg in ``adapter_kwargs``, so the report
+    never names another one than ran.
     """
     kwargs = adapter_kwargs_of(extra)
-    if margin is None:
-        return kwargs
-    problem = margin_problem(margin, name="--scan-margin")
-    if problem:
-        raise ValueError(problem)
-    given = kwargs.get("scan_margin")
-    if given is not None and given != margin:
-        raise ValueError(f"--scan-margin {margin:g} and --policy-param adapter_kwargs' scan_margin {given!r} "
-                         f"disagree; give one of them")
-    return {**kwargs, "scan_margin": margin}
+    for name, value in scan.items():
+        option, problem_of = SCAN_OPTIONS[name]
+        problem = problem_of(value, option)
+        if problem:
+            raise ValueError(problem)
+        given = kwargs.get(name)
+        if given is not None and given != value:
+            raise ValueError(f"{option} {value:g} and --policy-param adapter_kwargs' {name} {given!r} "
+                             f"disagree; give one of them")
+        kwargs[name] = value
+    return kwargs
 
 
 def policy_node_params(policy_path: str, adapter: str, twist: bool, drive: str, scale: float, dt: float,
-                       act_on: str, extra: Dict[str, Any], scan_margin: Optional[float] = None) -> Dict[str, Any]:
+                       act_on: str, extra: Dict[str, Any], scan: Optional[Dict[str, float]] = None) -> Dict[str, Any]:
     """policy_node's parameters for the fleet run: body-frame cmd_vel through ``adapter`` at the engine's
-    rate (1 / ``dt``), acting on ``act_on``, then ``extra`` (``--policy-param``); ``scan_margin``
-    (``--scan-margin``) goes into ``adapter_kwargs``."""
+    rate (1 / ``dt``), acting on ``act_on``, then ``extra`` (``--policy-param``); ``scan``
+    (``--scan-margin``, ``--scan-lead``) goes into ``adapter_kwargs``."""
     params = {"policy_path": str(Path(policy_path).resolve()), "adapter": adapter, "output": "cmd_vel",
               "use_stamped_cmd_vel": not twist, "base": drive, "cmd_vel_scale": scale, "rate_hz": 1.0 / dt,
               **extra, "act_on": act_on}
-    kwargs = adapter_kwargs_with_margin(scan_margin, extra)
+    kwargs = adapter_kwargs_with_scan(scan or {}, extra)
     if kwargs or "adapter_kwargs" in extra:
         params["adapter_kwargs"] = kwargs
     return params
@@ -186,7 +202,7 @@ def policy_node_params(policy_path: str, adapter: str, twist: bool, drive: str, 
 
 def fleet_adapter(spec: str, kwargs: Dict[str, Any], policy) -> Any:
     """The adapter policy_node will build for ``policy``, built here first: its refusals (a margin beyond the
-    lidar's range, a kwarg it does not take) come before anything runs, and it says which margin runs."""
+    lidar's range, a kwarg it does not take) come before anything runs, and it says which margin and lead run."""
     from vmas_ros.adapters import load_adapter
     from vmas_ros.simulator.env_snapshot import unique_names
 
@@ -232,13 +248,16 @@ def _run(args: argparse.Namespace) -> int:
     if adapter is None and "adapter" not in policy_extra:
         raise ValueError(f"no shipped adapter for scenario {scenario!r} (shipped: {', '.join(ADAPTER_OF)}); "
                          f"give one with --policy-param adapter:=package.module:Class")
-    if args.scan_margin is not None and ADAPTER_OF.get(scenario) != "navigation" and "adapter" not in policy_extra:
-        raise ValueError(f"--scan-margin is the navigation adapter's scan_margin; scenario {scenario!r} runs "
+    scan = scan_kwargs_of(args)
+    if scan and ADAPTER_OF.get(scenario) != "navigation" and "adapter" not in policy_extra:
+        name = next(iter(scan))
+        raise ValueError(f"{SCAN_OPTIONS[name][0]} is the navigation adapter's {name}; scenario {scenario!r} runs "
                          f"adapter {adapter!r}, which reads no scans")
     scale = held_action_speed(scenario, kwargs) if args.cmd_vel_scale == "auto" else float(args.cmd_vel_scale)
     adapter_spec = policy_extra.get("adapter", adapter or "")
-    built = fleet_adapter(adapter_spec, adapter_kwargs_with_margin(args.scan_margin, policy_extra), policy)
-    scan_margin = getattr(built, "scan_margin", None)  # None: an adapter without one
+    built = fleet_adapter(adapter_spec, adapter_kwargs_with_scan(scan, policy_extra), policy)
+    # what runs (None: an adapter without them), for the reports
+    scan_run = {name: getattr(built, name, None) for name in SCAN_OPTIONS}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -260,10 +279,10 @@ def _run(args: argparse.Namespace) -> int:
                     "odom_noise_velocity": noise[2], "end_on_goals": args.end_at_done, "seed": seeds[0],
                     **fleet_extra}
     policy_params = policy_node_params(args.policy, adapter or "", args.twist, args.drive, scale, engine["dt"],
-                                       act_on, policy_extra, args.scan_margin)
+                                       act_on, policy_extra, scan)
     starts = fleet_starts(engine["starts"], args.headings, np.random.default_rng(seeds[0]))
     command = "vmas-ros deploy-eval " + " ".join(shlex.quote(a) for a in _own_arguments())
-    margin_note = "" if scan_margin is None else f", scan margin {scan_margin:g} m"
+    margin_note = report.scan_note(scan_run)
 
     def fleet_report(folder: Path, latency: float) -> Dict[str, Any]:
         """The fleet's run at ``latency`` into ``folder``, its report written there; returns the totals."""
@@ -272,7 +291,7 @@ def _run(args: argparse.Namespace) -> int:
         rows = report.pair_episodes(engine, summary, labels)
         found = report.totals(rows, engine["per_robot_goals"])
         heading = {"policy": args.policy, "scenario": scenario, "scenario_kwargs": json.dumps(kwargs),
-                   "command": command, "fleet": summary["parameters"], "act_on": act_on, "scan_margin": scan_margin,
+                   "command": command, "fleet": summary["parameters"], "act_on": act_on, **scan_run,
                    "policy_node": ", ".join(f"{k} {v}" for k, v in policy_params.items()
                                           if k not in ("policy_path", "act_on"))}
         (folder / "report.json").write_text(json.dumps({"heading": heading, "rows": rows, "totals": found}, indent=1))
@@ -288,6 +307,6 @@ def _run(args: argparse.Namespace) -> int:
         fleet_report(out, args.latency)
         return 0
     text = sweep.run_sweep(out, latencies, fleet_report, policy=args.policy, command=command,
-                           per_robot_goals=engine["per_robot_goals"], act_on=act_on, scan_margin=scan_margin)
+                           per_robot_goals=engine["per_robot_goals"], act_on=act_on, scan=scan_run)
     print(text)
     return 0

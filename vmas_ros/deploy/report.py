@@ -67,8 +67,7 @@ def markdown(rows: List[Dict[str, Any]], summary: Dict[str, Any], per_robot_goal
              f"- command: `{heading['command']}`",
              "- fleet: " + ", ".join(f"{k} {heading['fleet'][k]}" for k in CONDITIONS if k in heading["fleet"]),
              f"- policy_node acts on: {heading.get('act_on', 'timer')}; parameters: {heading['policy_node']}"]
-    if heading.get("scan_margin") is not None:
-        lines.append(margin_line(heading["scan_margin"]))
+    lines += scan_lines(heading)
     lines.append("")
     columns = ["episode", "engine coverage (m)", "fleet coverage (m)", "ratio"]
     if per_robot_goals:
@@ -96,9 +95,27 @@ def markdown(rows: List[Dict[str, Any]], summary: Dict[str, Any], per_robot_goal
     return "\n".join(lines) + "\n"
 
 
-def margin_line(margin: float) -> str:
-    """The report line that states the navigation adapter's scan margin of the fleet run."""
-    return f"- scan margin: {margin:g} m (the navigation adapter's scan_margin: scan returns read that much closer)"
+def scan_lines(found: Dict[str, Any]) -> List[str]:
+    """The report lines that state the navigation adapter's scan margin and lead of the fleet run (from
+    ``found``'s ``scan_margin`` and ``scan_lead``; none for an adapter without them)."""
+    lines = []
+    if found.get("scan_margin") is not None:
+        lines.append(f"- scan margin: {found['scan_margin']:g} m (the navigation adapter's scan_margin: scan "
+                     f"returns read that much closer)")
+    if found.get("scan_lead") is not None:
+        lines.append(f"- scan lead: {found['scan_lead']:g} s (the navigation adapter's scan_lead: each ray also "
+                     f"read closer by the robot's speed towards it times this)")
+    return lines
+
+
+def scan_note(found: Dict[str, Any]) -> str:
+    """The plots' title note for the scan margin and lead (``found`` as for :func:`scan_lines`), or ''."""
+    parts = []
+    if found.get("scan_margin") is not None:
+        parts.append(f"scan margin {found['scan_margin']:g} m")
+    if found.get("scan_lead"):
+        parts.append(f"scan lead {found['scan_lead']:g} s")
+    return "".join(f", {part}" for part in parts)
 
 
 def plot(rows: List[Dict[str, Any]], per_robot_goals: bool, path, title: str) -> bool:

@@ -76,10 +76,9 @@ def _cell(value: Optional[float], form: str) -> str:
 
 
 def markdown(rows: List[Dict[str, Any]], policy: str, command: str, act_on: str = "timer",
-             scan_margin: Optional[float] = None) -> str:
+             scan: Optional[Dict[str, Any]] = None) -> str:
     lines = [f"- policy: `{policy}`", f"- command: `{command}`", f"- policy_node acts on: {act_on}"]
-    if scan_margin is not None:
-        lines.append(report.margin_line(scan_margin))
+    lines += report.scan_lines(scan or {})
     lines += ["",
              "| latency (ms) | episodes | engine success | fleet success | fleet / engine | engine done at (s) | "
              "fleet done at (s) | engine collisions / episode | fleet collisions / episode |",
@@ -121,11 +120,11 @@ def plot(rows: List[Dict[str, Any]], path: Path, title: str) -> bool:
 
 def run_sweep(out: Path, latencies: List[float], fleet_report: Callable[[Path, float], Dict[str, Any]],
               policy: str, command: str, per_robot_goals: bool, act_on: str = "timer",
-              scan_margin: Optional[float] = None) -> str:
+              scan: Optional[Dict[str, Any]] = None) -> str:
     """Run ``fleet_report(folder, latency)`` per latency, then write the sweep's files; returns its Markdown.
 
-    ``act_on``: policy_node's ``act_on`` in every run, stated in the files; so is ``scan_margin``, the
-    navigation adapter's (None: an adapter without one).
+    ``act_on``: policy_node's ``act_on`` in every run, stated in the files; so are ``scan``'s
+    ``scan_margin`` and ``scan_lead``, the navigation adapter's (None: an adapter without them).
     """
     if not per_robot_goals:
         raise ValueError("--latency-sweep measures success (every robot on its own goal): the policy's scenario has "
@@ -138,9 +137,9 @@ def run_sweep(out: Path, latencies: List[float], fleet_report: Callable[[Path, f
     rows = sweep_rows(results)
     below = first_below(rows)
     (out / "sweep.json").write_text(json.dumps({"policy": policy, "command": command, "act_on": act_on,
-                                                "scan_margin": scan_margin, "keep": KEEP, "first_below": below,
+                                                **(scan or {}), "keep": KEEP, "first_below": below,
                                                 "rows": rows}, indent=1))
-    text = markdown(rows, policy, command, act_on, scan_margin)
+    text = markdown(rows, policy, command, act_on, scan)
     (out / "sweep.md").write_text(text)
     plot(rows, out / "sweep.png", f"{Path(policy).name}: success on robot_fleet against command latency")
     return text
