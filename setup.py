@@ -48,6 +48,7 @@ setup(
         "test": [
             "pytest",
             "pytest-timeout",
+            "pytest-xdist",
             "vmas==1.5.2",
             "mpe2",
             "rosbags",

@@ -4,7 +4,9 @@
 # With no file arguments pytest collects `test/` (testpaths in pytest.ini).
 # `--quick` first: the contributors' tier (engine, scenario registry, env API, policies and the
 # import graph, without the slow and ROS tests), about two minutes; CI runs everything.
-# Exits with pytest's exit code.
+# With no arguments: the tests that can share the machine on two workers, then the
+# `serial` ones alone (VMAS_ROS_TEST_WORKERS sets the workers; 1: one plain run).
+# Exits with pytest's exit code (the worse of the two parts).
 set -euo pipefail
 
 QUICK=()
@@ -35,4 +37,28 @@ export PATH="$VENV/bin:$PATH"
 echo "test.sh: ROS_DOMAIN_ID=$ROS_DOMAIN_ID ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE" \
      "RMW_IMPLEMENTATION=$RMW_IMPLEMENTATION"
 
-exec "$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider ${QUICK[@]+"${QUICK[@]}"} "$@"
+PYTEST=("$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider)
+# Workers for the parallel part (pytest-xdist; each in a DDS domain of its own, see
+# test/conftest.py). 1, or any file or option given, runs one plain pytest instead.
+WORKERS="${VMAS_ROS_TEST_WORKERS:-2}"
+XDIST=()
+[ "$WORKERS" -gt 1 ] && XDIST=(-n "$WORKERS" --dist loadfile)
+if [ ${#QUICK[@]} -gt 0 ]; then
+  exec "${PYTEST[@]}" ${XDIST[@]+"${XDIST[@]}"} "${QUICK[@]}" "$@"
+fi
+if [ $# -gt 0 ] || [ "$WORKERS" -le 1 ]; then
+  exec "${PYTEST[@]}" "$@"
+fi
+
+# The whole suite: the tests that may share the machine on all workers, a file per
+# worker at a time (module fixtures stay shared); then the `serial` tests (they
+# measure time, rates or load) alone. Both parts always run; exit code: the worse.
+parallel=0 serial=0
+start=$SECONDS
+"${PYTEST[@]}" "${XDIST[@]}" -m "not serial" --durations=15 || parallel=$?
+echo "test.sh: parallel part (-n $WORKERS): exit $parallel in $(( SECONDS - start )) s"
+start=$SECONDS
+"${PYTEST[@]}" -m serial --durations=10 || serial=$?
+[ "$serial" -eq 5 ] && serial=0  # no serial test collected
+echo "test.sh: serial part: exit $serial in $(( SECONDS - start )) s"
+exit $(( parallel > serial ? parallel : serial ))

@@ -18,12 +18,33 @@ def _available_devices():
     return devices
 
 
+#: DDS domains run 0..232; worker k of a parallel run (pytest-xdist's ``gwK``) takes the session's domain
+#: plus k x this stride, so the workers' nodes never see each other. With test_rostools' "domain nobody
+#: uses" (the test's own domain + 117) no two of the domains coincide for up to three workers.
+WORKER_DOMAIN_STRIDE = 101
+DOMAINS = 233
+
+
+def xdist_worker() -> int:
+    """This process's pytest-xdist worker number (``gw1`` -> 1); -1 outside a parallel run's workers."""
+    name = os.environ.get("PYTEST_XDIST_WORKER", "")
+    return int(name[2:]) if name.startswith("gw") and name[2:].isdigit() else -1
+
+
 def pytest_configure(config):
     # Before any test (or collection-time import) creates a ROS context: a DDS
     # domain of this session's own, so parallel sessions don't see each other.
     # scripts/test.sh already exports one; this covers a bare `pytest`.
     if not os.environ.get("ROS_DOMAIN_ID"):
         os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
+    worker = xdist_worker()
+    if worker >= 0:
+        # a worker inherits the session's domain: each takes its own, and its child
+        # processes (nodes, scripts) one torch thread each, as the worker itself
+        # runs, so two workers and their nodes share the cores without contending
+        base = int(os.environ["ROS_DOMAIN_ID"])
+        os.environ["ROS_DOMAIN_ID"] = str((base + WORKER_DOMAIN_STRIDE * worker) % DOMAINS)
+        os.environ["OMP_NUM_THREADS"] = "1"
     # DDS discovery on this machine only (also for the nodes the tests start, which
     # inherit the environment): no test ever talks to another host.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"

@@ -12,7 +12,7 @@ from vmas_ros.bench.cli import parse_bench_args
 from vmas_ros.bench import cli as bench_cli
 from vmas_ros.bench.node import NODE_COLUMNS
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.serial]  # it measures a node's steps per second
 
 
 @pytest.fixture(scope="module")

@@ -21,6 +21,8 @@ import torch
 from vmas_ros.bench.soak import run_engine_soak, write_outputs
 from vmas_ros.bench.soak_node import read_bag_counts, run_node_soak
 
+pytestmark = pytest.mark.serial  # its verdicts read the machine's steps per second and memory
+
 REPO = Path(__file__).resolve().parents[2]
 
 

@@ -96,6 +96,7 @@ def test_needs_one_env():
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # a local Ray cluster fills the machine
 def test_one_ppo_iteration_on_local_ray():
     import ray
     from ray.rllib.algorithms.ppo import PPOConfig

@@ -209,6 +209,7 @@ def test_from_config_batches_and_checks_num_envs():
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # a local Ray cluster fills the machine
 def test_ppo_samples_from_one_batched_environment():
     import ray
     from ray.rllib.algorithms.ppo import PPOConfig

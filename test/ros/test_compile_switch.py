@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 from test.ros.conftest import stamp_ns
 from vmas_ros.simulator.compile_default import compiler_missing
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.serial]  # it times the waits between /clock messages
 
 RATE_HZ = 100.0  # paced: a compile that held the node would leave a wait of its whole length between two ticks
 READY = re.compile(r"compile_physics: compiled step in use from step (\d+) \(compiled in ([0-9.]+) s\)")

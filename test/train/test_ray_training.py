@@ -12,7 +12,7 @@ import torch
 
 from test.train.ray_cluster import TINY, LocalCluster, run_cli
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.serial]  # a local Ray cluster fills the machine
 
 
 @pytest.fixture(scope="module")
