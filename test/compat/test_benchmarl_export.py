@@ -1,6 +1,9 @@
-"""``vmas-ros export --from-benchmarl``: a BenchMARL MAPPO run becomes our STEM.onnx + STEM.json.
+"""BenchMARL trains on vmas_ros unchanged, and ``vmas-ros export --from-benchmarl`` makes its run our
+STEM.onnx + STEM.json.
 
-A tiny MAPPO run on BenchMARL's VMAS navigation task (``test.compat.benchmarl_run``,
+BenchMARL 1.5 pins torchrl < 0.12, so ``scripts/setup_benchmarl.sh`` makes
+``.venv-benchmarl`` (torch 2.13.0, benchmarl, vmas_ros with the gym extra).
+One tiny MAPPO run on BenchMARL's VMAS navigation task (``test.compat.benchmarl_run``,
 BenchMARL's venv from ``scripts/setup_benchmarl.sh``); BenchMARL's own
 deterministic actions on observations from stepping the task's env
 (``test.compat.benchmarl_actions``, same venv); the CLI conversion; then, in this
@@ -56,10 +59,24 @@ def exported(tmp_path_factory):
     _run([sys.executable, "-m", "vmas_ros.cli", "export", "--from-benchmarl", result["folder"], "--out", str(stem),
           "--benchmarl-python", python])
     return {
+        "python": python, "trained": result,
         "json": Path(str(stem) + ".json"),
         "observations": np.load(tmp_path / "recorded" / "observations.npy"),
         "actions": np.load(tmp_path / "recorded" / "actions.npy"),
     }
+
+
+def test_benchmarl_mappo_trains_on_vmas_ros(exported):
+    """BenchMARL's own VMAS navigation task, with ``vmas`` resolving to vmas_ros, beside torchrl 0.11."""
+    versions = subprocess.run(
+        [exported["python"], "-c", "import importlib.metadata as m; print(m.version('torchrl'), m.version('torch'))"],
+        capture_output=True, text=True, check=True,
+    ).stdout.split()
+    assert versions[0].startswith("0.11.") and versions[1].startswith("2.13.0"), versions
+    result = exported["trained"]
+    assert result["frames"] == 1200
+    assert result["env_class"] == "vmas_ros.envs.environment"  # BenchMARL stepped our Environment
+    assert result["checkpoints"] and all(Path(p).is_file() for p in result["checkpoints"])
 
 
 def test_onnx_actions_match_benchmarl(exported):
