@@ -42,7 +42,8 @@ PYTEST=("$VENV/bin/python" -m pytest -q -ra --timeout=600 -p no:cacheprovider)
 # test/conftest.py). 1, or any file or option given, runs one plain pytest instead.
 WORKERS="${VMAS_ROS_TEST_WORKERS:-2}"
 XDIST=()
-[ "$WORKERS" -gt 1 ] && XDIST=(-n "$WORKERS" --dist loadfile)
+# files in test/conftest.py's order (the long ones first), not xdist's
+[ "$WORKERS" -gt 1 ] && XDIST=(-n "$WORKERS" --dist loadfile --no-loadscope-reorder)
 if [ ${#QUICK[@]} -gt 0 ]; then
   exec "${PYTEST[@]}" ${XDIST[@]+"${XDIST[@]}"} "${QUICK[@]}" "$@"
 fi

@@ -69,6 +69,39 @@ def pytest_configure(config):
     torch.set_num_threads(1)
 
 
+#: files with a test or a module set-up of a minute or more, longest first. On the workers they start
+#: first (scripts/test.sh keeps this order: --no-loadscope-reorder), so that none of them begins late and
+#: leaves one worker running it alone at the end; the other files follow, most tests first.
+LONG_FILES = (
+    "test/compat/test_vmas_suite.py",
+    "test/compat/test_benchmarl_export.py",
+    "test/compat/test_vmas_suite_on_vmas.py",
+    "test/scenarios/test_vmas_files.py",
+    "test/ros/test_multi_sim.py",
+    "test/simulator/test_compiled_physics.py",
+    "test/ros/test_rostools.py",
+    "test/ros/test_sim_node_bag_folder.py",
+    "test/compat/test_torchrl_vmas.py",
+)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The long files first, in LONG_FILES' order, then the others by their number of tests, most first
+    (pytest-xdist's own order for --dist loadfile); within a file, pytest's order."""
+    counts: dict = {}
+    for item in items:
+        path = item.nodeid.split("::", 1)[0]
+        counts[path] = counts.get(path, 0) + 1
+    rank = {path: i for i, path in enumerate(LONG_FILES)}
+    first_seen = {path: i for i, path in enumerate(counts)}
+
+    def key(item):
+        path = item.nodeid.split("::", 1)[0]
+        return (rank.get(path, len(rank)), -counts[path], first_seen[path])
+
+    items.sort(key=key)  # stable: a file's own tests keep their order
+
+
 #: a test still running after this many seconds ends the whole run, with every
 #: thread's stack on stderr: pytest-timeout's limit (pytest.ini) raises in Python,
 #: which cannot stop a thread stuck inside native code

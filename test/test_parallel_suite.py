@@ -57,3 +57,23 @@ def test_every_test_that_starts_ray_is_serial():
             if not (node.name.startswith("test_") and "pytest.mark.serial" in decorators):
                 unmarked.append(f"{path.relative_to(TEST_ROOT.parent)}::{node.name}")
     assert not unmarked, f"start a Ray cluster without running serially: {unmarked}"
+
+
+def test_the_long_files_named_to_start_first_exist():
+    missing = [path for path in conftest.LONG_FILES if not (TEST_ROOT.parent / path).is_file()]
+    assert not missing, f"test/conftest.py's LONG_FILES names files that are gone: {missing}"
+    assert len(set(conftest.LONG_FILES)) == len(conftest.LONG_FILES)
+
+
+def test_the_long_files_come_first_and_each_file_stays_together():
+    class Item:
+        def __init__(self, nodeid):
+            self.nodeid = nodeid
+
+    names = ["test/a.py::x", "test/b.py::x", "test/b.py::y", conftest.LONG_FILES[1] + "::t",
+             conftest.LONG_FILES[0] + "::t", "test/a.py::z", "test/b.py::z"]
+    items = [Item(n) for n in names]
+    conftest.pytest_collection_modifyitems(None, None, items)
+    assert [i.nodeid for i in items] == [conftest.LONG_FILES[0] + "::t", conftest.LONG_FILES[1] + "::t",
+                                         "test/b.py::x", "test/b.py::y", "test/b.py::z", "test/a.py::x",
+                                         "test/a.py::z"]

@@ -8,7 +8,6 @@ runs them with ``vmas`` resolving to vmas_ros. Its repository-only tests
 """
 from __future__ import annotations
 
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -34,15 +33,3 @@ def test_vmas_sdist_tests_pass_on_vmas_ros():
     counts = summary(run.stdout)
     assert last.startswith("vmas suite on vmas_ros:") and counts["failed"] == counts["errors"] == 0
     assert counts["passed"] >= 340, last  # all 41 scenarios through each of test_vmas.py's checks
-
-
-def test_the_same_tests_run_on_vmas_itself():
-    """``--on-vmas``: VMAS's tests on VMAS (one test here), the yardstick for the suite's time on vmas_ros."""
-    run = subprocess.run(
-        [sys.executable, "-m", "test.compat.vmas_suite", "--on-vmas", "--", "-k", "test_lidar"], cwd=ROOT,
-        capture_output=True, text=True, timeout=900,
-    )
-    assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-3000:]
-    lines = run.stdout.strip().splitlines()
-    assert lines[0].startswith("vmas suite on VMAS 1.5.2: tests/test_vmas.py, tests/test_lidar.py; VMAS's own")
-    assert re.match(r"vmas suite on VMAS 1\.5\.2: [1-9]\d* passed, 0 failed, \d+ skipped in \d+ s$", lines[-1])
