@@ -61,11 +61,16 @@ def sdist(cache: Path) -> Path:
     cache.mkdir(parents=True, exist_ok=True)
     found = sorted(cache.glob(f"vmas-{VMAS_VERSION}.tar.gz"))
     if not found:
-        subprocess.run(
-            [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--no-binary", ":all:",
-             f"vmas=={VMAS_VERSION}", "--dest", str(cache)],
-            check=True,
-        )
+        # into a folder of this process's own, then renamed into place: two runs at once (the suite's
+        # workers) never see each other's half-written file
+        with tempfile.TemporaryDirectory(dir=cache, prefix=".download_") as private:
+            subprocess.run(
+                [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--no-binary", ":all:",
+                 f"vmas=={VMAS_VERSION}", "--dest", private],
+                check=True,
+            )
+            for archive in Path(private).glob(f"vmas-{VMAS_VERSION}.tar.gz"):
+                archive.replace(cache / archive.name)
         found = sorted(cache.glob(f"vmas-{VMAS_VERSION}.tar.gz"))
     if not found:
         raise FileNotFoundError(f"pip download did not leave vmas-{VMAS_VERSION}.tar.gz in {cache}")
