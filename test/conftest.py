@@ -75,7 +75,6 @@ def pytest_configure(config):
 LONG_FILES = (
     "test/compat/test_vmas_suite.py",
     "test/compat/test_benchmarl_export.py",
-    "test/compat/test_vmas_suite_on_vmas.py",
     "test/scenarios/test_vmas_files.py",
     "test/ros/test_multi_sim.py",
     "test/simulator/test_compiled_physics.py",
