@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from test.deploy.test_deploy_act_on import fake_fleet
+from test.deploy.test_deploy_scan_margin import navigation_policy  # noqa: F401 (fixture: a still 2-agent policy)
 from test.ros.policy_files import write_policy
 from vmas_ros.cli import main
 from vmas_ros.deploy import cli as deploy_cli
@@ -39,12 +40,6 @@ def test_a_lead_that_cannot_run_is_refused(lead, extra, problem):
     with pytest.raises(ValueError) as error:
         params({"scan_lead": lead}, extra)
     assert str(error.value) == problem
-
-
-@pytest.fixture
-def navigation_policy(tmp_path):
-    return write_policy(tmp_path, "still", np.zeros((18, 2)), [0.0, 0.0], agents=("agent_0", "agent_1"),
-                        scenario="navigation", scenario_kwargs={"n_agents": 2})
 
 
 def test_deploy_eval_runs_the_lead_and_reports_it(tmp_path, monkeypatch, navigation_policy):
