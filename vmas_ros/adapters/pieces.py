@@ -20,8 +20,8 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 __all__ = [
-    "ANGLE_TOLERANCE", "ENCODINGS", "FRAMES", "ScanResampler", "inflate", "lead_problem", "margin_problem",
-    "odometry_state", "pose_array_positions", "pose_position", "read_odometry",
+    "ANGLE_TOLERANCE", "ENCODINGS", "FRAMES", "ScanResampler", "closing_margins", "inflate", "lead_problem",
+    "margin_problem", "odometry_state", "pose_array_positions", "pose_position", "read_odometry",
 ]
 
 TWO_PI = 2 * math.pi
