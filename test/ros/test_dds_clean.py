@@ -97,6 +97,7 @@ def _ports_in_use() -> set:
 
 
 @pytest.mark.skipif(not SHM_DIR.is_dir(), reason="Fast DDS keeps no shared memory here (no /dev/shm)")
+@pytest.mark.serial  # it plants stuck segments on the ports every participant on the machine probes
 def test_sim_node_starts_past_stuck_ports(sim_log_dir, monkeypatch):
     """Stuck segments on every port no process uses, so a new participant probes one whatever it
     picks: the node removes them and starts (without that it would wait forever). No participant
