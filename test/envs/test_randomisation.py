@@ -166,3 +166,46 @@ def test_a_layout_wider_than_the_observations_is_refused_naming_both():
 
     with pytest.raises(ValueError, match="the observation layout needs 42 columns, but the observations have 18"):
         vmas_ros.make_env(_WideLayout(), num_envs=2, compile_physics=False, randomisation={"position_noise": 0.01})
+
+
+def test_each_observation_element_reads_its_errors_number_from_the_seed_step_and_element(device):
+    """The noise's numbering, from sensor_noise's parts by hand: per agent and env, numbers 0-1 are the
+    position's error, 2-3 the velocity's and one per lidar ray after them; every column that moves with the
+    position (the position and the position minus the goal) takes the same one."""
+    from vmas_ros.envs import sensor_noise
+    from vmas_ros.envs.randomiser import SEED_OFFSET
+
+    sigmas = {"position_noise": 0.05, "velocity_noise": 0.03, "lidar_noise": 0.02, "lidar_dropout": 0.3}
+    kwargs = dict(n_envs=16, world_spawning_x=0.5, world_spawning_y=0.5)  # crowded: lidars see neighbours
+    clean_env, noisy_env = _navigation(device, **kwargs), _navigation(device, sigmas, **kwargs)
+    for env in (clean_env, noisy_env):
+        env.seed(3)  # the noise's steps count from here: the reset's observations are its step 0
+    clean, noisy = torch.stack(clean_env.reset()), torch.stack(noisy_env.reset())  # [A, B, 18]
+    n_agents, n_envs, _ = clean.shape
+    rays = noisy_env.scenario.n_lidar_rays
+    int32 = lambda value: torch.tensor(value, dtype=torch.int32, device=device)
+    key = sensor_noise.stream_key(sensor_noise.hash32(int32(SEED_OFFSET + 3)), int32(0))  # the first noise step
+    numbers = sensor_noise.hashes(key, (n_agents, n_envs, 4 + rays))
+    errors = sensor_noise.normals(numbers, torch.float32)
+    expected = clean.clone()
+    expected[..., 0:2] += errors[..., 0:2] * sigmas["position_noise"]
+    expected[..., 2:4] += errors[..., 2:4] * sigmas["velocity_noise"]
+    expected[..., 4:6] += errors[..., 0:2] * sigmas["position_noise"]
+    readings = clean[..., 6:]
+    kept = (readings != 0) & (sensor_noise.uniforms(numbers[..., 4:], torch.float32) > sigmas["lidar_dropout"])
+    seen = (readings + errors[..., 4:] * sigmas["lidar_noise"]).clamp(0.0, noisy_env.scenario.lidar_range)
+    expected[..., 6:] = torch.where(kept, seen, torch.zeros_like(readings))
+    assert int(kept.sum()) > 0 and int(((readings != 0) & ~kept).sum()) > 0, "some rays seen, some dropped"
+    assert torch.equal(noisy, expected)
+
+
+def test_a_layout_that_moves_a_column_with_two_errors_is_refused_naming_it():
+    from vmas_ros.scenarios.navigation import Scenario
+    from vmas_ros.simulator.observation_layout import ObservationLayout
+
+    class _Overlapping(Scenario):
+        def observation_layout(self, agent):
+            return ObservationLayout(position=((0, 1),), velocity=((1, 1),))
+
+    with pytest.raises(ValueError, match="observation column 1 moves with both the position and the velocity"):
+        vmas_ros.make_env(_Overlapping(), num_envs=2, compile_physics=False, randomisation={"position_noise": 0.01})

@@ -261,10 +261,12 @@ class Environment(OwnRandomStreams):
                 smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
                 if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
                     self._name_bad_action(stacked, tensors)
-            if self.randomiser is not None:  # what the agents execute: the commands delayed and lagged
-                stacked, tensors = self.randomiser.commands(stacked), None
-            if stacked_step.set_stacked_forces(self, stacked):
+            commands = self.randomiser.commands if self.randomiser is not None else None
+            # what the agents execute: with a randomiser, the commands delayed and lagged
+            if stacked_step.set_stacked_forces(self, stacked, commands):
                 return
+            if commands is not None:
+                stacked, tensors = commands(stacked), None
             tensors = list(stacked.unbind(0)) if tensors is None else tensors
         elif self.clamp_action and self.continuous_actions:
             self._name_bad_action(None, tensors, unbounded=True)
@@ -365,12 +367,15 @@ class Environment(OwnRandomStreams):
                 rewards = [scenario.reward(agent) for agent in agents]
             else:  # each copied as it comes: a scenario may return a buffer it overwrites for the next agent
                 rewards = [scenario.reward(agent).clone() for agent in agents]
-        if get_obs:
+        if get_obs and self.randomiser is not None and self.randomiser.on_observations:
+            # the noise makes new tensors: from the scenario's stacked observations where it has them
+            stacked = scenario.stacked_observations() if isinstance(scenario, BaseScenario) else None
+            obs = (list(self.randomiser.observations(stacked, per_agent=True)) if stacked is not None
+                   else self.randomiser.observation_list([scenario.observation(agent) for agent in agents]))
+        elif get_obs:
             obs = [scenario.observation(agent) for agent in agents]
             if not scenario.fresh_observations:
                 obs = [TorchUtils.recursive_clone(o) for o in obs]
-            if self.randomiser is not None and self.randomiser.on_observations:
-                obs = self.randomiser.observation_list(obs)
         if (get_obs or get_rewards and scenario.fresh_rewards) and isinstance(scenario, BaseScenario):
             scenario.env_observations_handed_out()  # what went out uncopied is theirs: compute afresh next
         infos = [TorchUtils.recursive_clone(scenario.info(agent)) for agent in agents] if get_infos else None

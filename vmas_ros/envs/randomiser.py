@@ -10,19 +10,24 @@ The environment calls it at three points, and only when randomisation is on:
 - on the observations handed out (:meth:`Randomiser.observations`).
 
 Everything is batched over agents and envs: per-agent-and-env settings are
-``[A, B]`` tensors, the command history is one ring buffer ``[D + 1, A, B,
-size]`` (``D``: the longest delay in steps) read with one gather, and the
-settings drawn at resets come for all agents at once from a generator of
-its own, seeded from the env's seed; the observation noise's numbers are a
-hash of that seed, the noise's step and the element
-(:mod:`~vmas_ros.envs.sensor_noise`), computed inside the noise's kernel.
+``[A, B]`` tensors, the command history is a shift register ``[D + 1, A, B,
+size]`` (``D``: the longest delay in steps; row ``k``: the command given
+``k`` steps ago) read with one gather, and the settings drawn at resets
+come for all agents at once from a generator of its own, seeded from the
+env's seed. The observation noise is one pass over the observations'
+elements: each column knows which error moves it and by how much
+(per-column tables made at each reset), and each element computes that
+error's random number itself, a hash of the seed, the noise's step and the
+error's index (:mod:`~vmas_ros.envs.sensor_noise`), so the columns that
+share a position error get the same one. The commands and the noise are
+pure functions, compiled with the world's physics when it compiles.
 The scenario's random stream is left as it would be without randomisation,
 so the same seed gives the same start states with and without it.
 """
 from __future__ import annotations
 
 from functools import partial
-from typing import Dict, List, Optional, Tuple, Union
+from typing import Dict, List, Optional, Tuple
 
 import torch
 from torch import Tensor
@@ -30,7 +35,6 @@ from torch import Tensor
 from vmas_ros.envs import sensor_noise
 from vmas_ros.envs.randomisation import HALF_UP, SETTINGS, Randomisation
 from vmas_ros.simulator.compiling import WorldKernel
-from vmas_ros.simulator.tracing import tracing
 
 __all__ = ["Randomiser", "SEED_OFFSET"]
 
@@ -50,6 +54,7 @@ class Randomiser:
         self._active = [name for name in SETTINGS if config.active(name)]
         # what runs in a step, decided once (the config is frozen)
         self._latency, self._lag = config.active("command_latency"), config.active("actuator_lag")
+        self._on_commands = config.acts_on_commands
         #: whether the observations handed out go through observations()
         self.on_observations = config.acts_on_observations
         self.generator = torch.Generator(device=env.device)
@@ -64,22 +69,22 @@ class Randomiser:
                                  f"{scenario_name}'s agents take {sizes}")
             if config.active("actuator_lag") and not env.continuous_actions:
                 raise ValueError("actuator_lag needs continuous actions (a lagged discrete choice means nothing)")
-        #: the longest delay in steps, the ring buffer of commands given and where the next goes
+        #: the longest delay in steps, and the commands of the last D + 1 steps (row k: k steps ago)
         self.max_delay = config.latency_steps(config.command_latency[1], self._dt)
         self._history: Optional[Tensor] = None
-        self._slot = 0
         self._delay: Optional[Tensor] = None  # [A, B] long
+        self._read: Optional[Tensor] = None  # [1, A * B * size] long: the delay per element, as gather's index
         self._alpha: Optional[Tensor] = None  # [A, B, 1]
-        self._executed: Optional[Tensor] = None  # [A, B, size], the lag's state
+        self._alpha_flat: Optional[Tensor] = None  # [A * B * size]
+        self._executed: Optional[Tensor] = None  # [A * B * size], the lag's state
+        self._delay_and_lag = WorldKernel(env.world, _delayed_and_lagged)
         self._layout = None
         if config.acts_on_observations:
             self._layout = _one_layout(env, scenario_name, config)
-        self._projection: Optional[Tensor] = None  # [4, O] once the width is known (_projection)
+        self._columns: Optional[_NoiseColumns] = None  # once the observations' shape is known
         self._perturb = None  # _perturbed with the layout's lidar columns, compiled with the world's physics
-        self._pair_sigma: Optional[Tensor] = None  # [A, B, 4] position, position, velocity, velocity std
-        self._lidar_sigma: Optional[Tensor] = None  # [A, B, 1] (None: no lidar noise or dropout)
-        self._dropout: Optional[Tensor] = None  # [A, B, 1]
-        self._reads: Optional[Tensor] = None  # [D + 1, A * B] history rows per slot (_read_rows)
+        self._column_scale: Optional[Tensor] = None  # [A * B * O] each element's error's standard deviation
+        self._dropout: Optional[Tensor] = None  # [A * B * O], -1 off the rays (None: no lidar noise or dropout)
         self._agent_rows: Optional[Tensor] = None
         if config.acts_on_dynamics:
             rows = {id(entity): row for row, entity in enumerate(env.world.entities)}
@@ -108,28 +113,32 @@ class Randomiser:
             self.params[name][:, columns] = values
         if self._latency:
             self._delay = torch.floor(self.params["command_latency"] / self._dt + HALF_UP).long().clamp_(0, self.max_delay)
-            self._reads = None
+            self._read = None
         if self._lag:
             tau = self.params["actuator_lag"]  # 0: no lag, the command is executed as it comes (alpha 1)
             alpha = 1 - torch.exp(-self._dt / tau.clamp_min(torch.finfo(tau.dtype).tiny))
             self._alpha = torch.where(tau > 0, alpha, torch.ones_like(alpha)).unsqueeze(-1)
+            self._alpha_flat = None
         if self._history is not None:
             self._history.view(self.max_delay + 1, n_agents, n_envs, -1)[:, :, columns] = 0
         if self._executed is not None:
-            self._executed[:, columns] = 0
+            self._executed.view(n_agents, n_envs, -1)[:, columns] = 0
         if self.config.acts_on_dynamics:
             self._scale_world()
         if self.config.acts_on_observations:
             self._observation_scales()
 
     def _observation_scales(self) -> None:
-        """The noise's standard deviations (and the dropout) per agent and env, in the forms _perturbed takes."""
+        """Each column's standard deviation per agent and env, and the dropout, in the forms _perturbed takes
+        (once the observations' columns are known: the first observations read them)."""
+        if self._columns is None:
+            return
         params, zeros = self.params, torch.zeros(self._shape, device=self._env.device)
-        position, velocity = params.get("position_noise", zeros), params.get("velocity_noise", zeros)
-        self._pair_sigma = torch.stack([position, position, velocity, velocity], dim=-1)
-        if self.config.active("lidar_noise", "lidar_dropout"):
-            self._lidar_sigma = params.get("lidar_noise", zeros).unsqueeze(-1)
-            self._dropout = params.get("lidar_dropout", zeros).unsqueeze(-1)
+        sigmas = torch.stack([params.get(name, zeros) for name in _NoiseColumns.SIGMAS], dim=-1)  # [A, B, 3]
+        self._column_scale = (sigmas.index_select(-1, self._columns.sigma) * self._columns.sign).reshape(-1)
+        if self.config.active("lidar_noise", "lidar_dropout"):  # per element; -1 off the lidar's columns
+            dropout = params.get("lidar_dropout", zeros).unsqueeze(-1).expand(*self._shape, self._columns.width)
+            self._dropout = torch.where(self._columns.lidar, dropout, -1.0).reshape(-1)
 
     def _scale_world(self) -> None:
         world = self._env.world
@@ -142,49 +151,49 @@ class Randomiser:
         world.scale_dynamics(full["mass_scale"], full["drag_scale"])
 
     # ----------------------------------------------------------------- commands
-    def commands(self, given: Tensor) -> Tensor:
-        """What each agent executes this step, ``[A, B, size]``, from the commands ``given`` now."""
-        executed = given
+    def commands(self, given: Tensor, into: Optional[Tensor] = None) -> Tensor:
+        """What each agent executes this step, ``[A, B, size]``, from the commands ``given`` now; with
+        ``into`` (a tensor of their shape), also written into it."""
+        if not self._on_commands:
+            if into is not None:
+                into.copy_(given)
+            return given
         if self._latency:
             if self._history is None:
-                self._history = torch.zeros((self.max_delay + 1) * given.shape[0] * given.shape[1], given.shape[2],
-                                            dtype=given.dtype, device=given.device)
-                self._reads = None
-            if self._reads is None:
-                self._reads = _read_rows(self._delay, self.max_delay + 1)
-            rows = given.shape[0] * given.shape[1]
-            self._history[self._slot * rows:(self._slot + 1) * rows] = given.reshape(rows, -1)
-            executed = self._history.index_select(0, self._reads[self._slot]).view(given.shape)
-            self._slot = (self._slot + 1) % (self.max_delay + 1)
+                self._history = given.new_zeros((self.max_delay + 1, given.numel()))
+            if self._read is None:
+                self._read = self._delay.view(1, *self._shape, 1).expand(1, *given.shape).reshape(1, -1)
         if self._lag:
             if self._executed is None:
-                self._executed = torch.zeros_like(given)
-            self._executed = torch.lerp(self._executed, executed, self._alpha)
-            executed = self._executed
+                self._executed = given.new_zeros(given.numel())
+            if self._alpha_flat is None:
+                self._alpha_flat = self._alpha.expand(given.shape).reshape(-1)
+        history, lagged, executed = self._delay_and_lag(given, self._history, self._read, self._executed,
+                                                        self._alpha_flat, into)
+        self._history, self._executed = history, lagged
         return executed
 
     # ------------------------------------------------------------- observations
-    def observations(self, obs: Union[Tensor, Tuple[Tensor, ...]]):
-        """Every agent's observation ``[A, B, O]`` as a robot's sensors would give it (a new tensor); given
-        a tuple of ``[B, O]``, one per agent, a tuple of new ones."""
-        layout = self._layout
-        shape = obs.shape if isinstance(obs, Tensor) else (len(obs), *obs[0].shape)
-        if self._projection is None or self._projection.shape[1] != shape[2]:
-            if layout.width_needed() > shape[2]:
-                raise ValueError(f"the observation layout needs {layout.width_needed()} columns, but the "
-                                 f"observations have {shape[2]}")
-            self._projection = _projection(layout, shape[2], obs if isinstance(obs, Tensor) else obs[0])
-            self._perturb = WorldKernel(self._env.world, partial(_perturbed, lidar=None if layout.lidar is None else (
-                layout.lidar.start, layout.lidar.count, float(layout.lidar.max_value), float(layout.lidar.miss))))
-        noisy = self._perturb(obs, self._seed_key, self._step, self._pair_sigma, self._projection, self._lidar_sigma,
-                              self._dropout)
-        self._step.add_(1)
+    def observations(self, obs: Tensor, per_agent: bool = False):
+        """Every agent's observation ``[A, B, O]`` as a robot's sensors would give it (a new tensor), or with
+        ``per_agent`` a tuple of each agent's ``[B, O]`` (views of one new tensor)."""
+        if self._columns is None or self._columns.width != obs.shape[2]:
+            self._columns = _NoiseColumns(self._layout, obs.shape, obs.device)
+            self._observation_scales()
+            self._perturb = {}
+        kernel = self._perturb.get(per_agent)
+        if kernel is None:
+            lidar = self._layout.lidar
+            kernel = self._perturb[per_agent] = WorldKernel(self._env.world, partial(
+                _perturbed, per_agent=per_agent,
+                lidar=None if lidar is None else (float(lidar.max_value), float(lidar.miss))))
+        noisy, self._step = kernel(obs, self._seed_key, self._step, self._columns.index, self._column_scale,
+                                   self._dropout)
         return noisy
 
     def observation_list(self, obs: List[Tensor]) -> List[Tensor]:
-        """:meth:`observations` for one ``[B, O]`` tensor per agent (stacked and split inside the kernel,
-        where a compiled one reads and writes them in place of two more passes over the observations)."""
-        return list(self.observations(tuple(obs)))
+        """:meth:`observations` for one ``[B, O]`` tensor per agent."""
+        return list(self.observations(torch.stack(obs), per_agent=True))
 
 
 def _as_int32(value: int) -> int:
@@ -193,58 +202,95 @@ def _as_int32(value: int) -> int:
     return value - (1 << 32) if value >= 1 << 31 else value
 
 
-def _read_rows(delay: Tensor, period: int) -> Tensor:
-    """``[period, A * B]``: per ring slot, the rows of the flat ``[period * A * B, size]`` history each agent and env
-    executes when the newest command went into that slot (its command ``delay`` steps back)."""
-    n_agents, n_envs = delay.shape
-    slots = torch.arange(period, device=delay.device).view(period, 1, 1)
-    cell = torch.arange(n_agents * n_envs, device=delay.device).view(1, n_agents, n_envs)
-    return (((slots - delay.unsqueeze(0)) % period) * (n_agents * n_envs) + cell).flatten(1)
+def _delayed_and_lagged(given: Tensor, history: Optional[Tensor], read: Optional[Tensor],
+                        lagged: Optional[Tensor], alpha: Optional[Tensor], into: Optional[Tensor]):
+    """``(history, lagged, executed)`` for the commands ``given`` ``[A, B, size]``, each of their elements
+    flat as one run ``[N]`` (the compiled pass vectorises along it): ``given`` shifted into ``history``
+    ``[D + 1, N]`` (row k: given k steps ago; None: no latency) and read ``read`` ``[1, N]`` rows back; then
+    lagged, ``lagged`` (the lag's state, None: no lag) moving by ``alpha`` ``[N]`` towards them; ``executed``
+    in the shape of ``given``, also written into ``into`` unless None (where the step reads its forces:
+    the write then costs no pass of its own). New tensors otherwise: it compiles with the world's physics."""
+    executed = given.reshape(-1)
+    if history is not None:
+        history = torch.cat([executed.unsqueeze(0), history[:-1]])
+        executed = history.gather(0, read).squeeze(0)
+    if lagged is not None:
+        lagged = executed = torch.lerp(lagged, executed, alpha)
+    executed = executed.view(given.shape)
+    if into is not None:
+        into.copy_(executed)
+    return history, lagged, executed
 
 
-def _projection(layout, width: int, like: Tensor) -> Tensor:
-    """``[4, width]``: a (position x, y, velocity x, y) error times it lands on every column that moves with it."""
-    matrix = torch.zeros(4, width, dtype=like.dtype, device=like.device)
-    for offset, pairs in ((0, layout.position), (2, layout.velocity)):
-        for column, sign in pairs:
-            matrix[offset, column] = float(sign)
-            matrix[offset + 1, column + 1] = float(sign)
-    return matrix
+class _NoiseColumns:
+    """Per observation column, which error moves it, in tables the noise's one pass reads.
 
-
-def _perturbed(obs, seed_key: Tensor, step: Tensor, pair_sigma: Tensor, projection: Tensor,
-               lidar_sigma: Optional[Tensor], dropout: Optional[Tensor], lidar):
-    """``obs`` ``[A, B, O]`` as a robot's sensors would give it, with the random numbers of noise ``step``
-    (0-d int32) of the stream ``seed_key`` (see :mod:`~vmas_ros.envs.sensor_noise`); ``obs`` given as a
-    tuple of each agent's ``[B, O]`` gives a tuple back.
-
-    Four normal errors per agent and env, times ``pair_sigma`` ``[A, B, 4]``, are the position and velocity
-    errors, which ``projection`` ``[4, O]`` puts on every column that moves with them. Per lidar ray: a normal
-    error times ``lidar_sigma`` ``[A, B, 1]``, and a dropout with probability ``dropout`` ``[A, B, 1]``.
-    A ray that saw nothing still sees nothing; the others stay in the sensor's range. A pure function
-    of its arguments: it compiles with the world's physics.
+    Each agent and env has ``4 + rays`` errors, numbered as the noise's random
+    numbers: the position's x and y, the velocity's x and y, then one per
+    lidar ray. ``index`` ``[A * B * O]`` int32, per element of the
+    observations (flat: the noise's pass vectorises along one run): the
+    number of the error that moves it (``(agent * B + env) * (4 + rays)``
+    plus the column's error; a column nothing moves reads error 0 with a
+    scale of 0). ``sigma`` ``[O]``: which of :attr:`SIGMAS` scales the
+    column's error, and ``sign`` ``[O]`` its sign (0: unmoved); ``lidar``
+    ``[O]`` bool: the lidar's rays.
     """
-    if not isinstance(obs, Tensor):
-        return _perturbed(torch.stack(obs), seed_key, step, pair_sigma, projection, lidar_sigma, dropout,
-                          lidar).unbind(0)
-    n_agents, n_envs, _ = obs.shape
-    rays = 0 if lidar is None else lidar[1]
-    numbers = sensor_noise.hashes(sensor_noise.stream_key(seed_key, step), (n_agents, n_envs, 4 + rays))
-    errors = sensor_noise.normals(numbers[..., :4], obs.dtype) * pair_sigma
-    if tracing():  # four broadcast products fuse with the rest
-        noisy = obs + (errors.unsqueeze(-1) * projection).sum(dim=-2)
-    else:  # one matmul is the cheaper eager call
-        noisy = torch.addmm(obs.reshape(-1, obs.shape[-1]), errors.reshape(-1, 4), projection).view(obs.shape)
-    if lidar_sigma is None:
-        return noisy
-    start, count, max_value, miss = lidar
-    per_ray = numbers[..., 4:]
-    kept = sensor_noise.uniforms(per_ray, obs.dtype) > dropout
-    ray_errors = sensor_noise.normals(per_ray, obs.dtype)
-    readings = obs[..., start:start + count]
-    seen = (readings + lidar_sigma * ray_errors).clamp(0.0, max_value)
-    readings = torch.where((readings != miss) & kept, seen, torch.full_like(readings, miss))
-    return torch.cat([noisy[..., :start], readings, noisy[..., start + count:]], dim=-1)
+
+    SIGMAS = ("position_noise", "velocity_noise", "lidar_noise")
+
+    def __init__(self, layout, shape, device) -> None:
+        n_agents, n_envs, self.width = shape
+        if layout.width_needed() > self.width:
+            raise ValueError(f"the observation layout needs {layout.width_needed()} columns, but the "
+                             f"observations have {self.width}")
+        error, sigma, sign, lidar = [0] * self.width, [0] * self.width, [0.0] * self.width, [False] * self.width
+        owner = {}
+        for first_error, name, pairs in ((0, "position", layout.position), (2, "velocity", layout.velocity)):
+            for column, pair_sign in pairs:
+                for axis in (0, 1):
+                    if column + axis in owner and owner[column + axis] != name:
+                        raise ValueError(f"observation column {column + axis} moves with both the "
+                                         f"{owner[column + axis]} and the {name}: a layout gives each column one")
+                    owner[column + axis] = name
+                    error[column + axis], sigma[column + axis] = first_error + axis, first_error // 2
+                    sign[column + axis] = float(pair_sign)
+        rays = 0
+        if layout.lidar is not None:
+            rays = layout.lidar.count
+            for ray in range(rays):
+                column = layout.lidar.start + ray
+                error[column], sigma[column], sign[column], lidar[column] = 4 + ray, 2, 1.0, True
+        cells = torch.arange(n_agents * n_envs, dtype=torch.int32, device=device).view(n_agents, n_envs, 1)
+        self.index = (cells * (4 + rays) + torch.tensor(error, dtype=torch.int32, device=device)).reshape(-1)
+        self.sigma = torch.tensor(sigma, device=device)
+        self.sign = torch.tensor(sign, device=device)
+        self.lidar = torch.tensor(lidar, device=device)
+
+
+def _perturbed(obs: Tensor, seed_key: Tensor, step: Tensor, index: Tensor, scale: Tensor, dropout: Optional[Tensor],
+               lidar, per_agent: bool):
+    """``(noisy, next step)``: the observations ``obs`` ``[A, B, O]`` as a robot's sensors would give them
+    (``per_agent``: as a tuple of each agent's ``[B, O]``), with the random numbers of noise ``step`` (0-d
+    int32) of the stream ``seed_key`` (see :mod:`~vmas_ros.envs.sensor_noise`). The other arguments hold
+    one number per element of ``obs``, flat (``[A * B * O]``: the compiled pass vectorises along one run).
+
+    Each element moves by a normal error times ``scale`` (its column's standard deviation and sign; 0:
+    unmoved), the error numbered ``index`` (see :class:`_NoiseColumns`), so every column of one error moves
+    by the same amount. Where ``dropout`` is at least 0 (the lidar's rays, with ``lidar`` = ``(max_value,
+    miss)``; None: the rays stay as they are), the same number's high byte drops the ray with that
+    probability; a ray that saw nothing still sees nothing, the others stay in the sensor's range. One pass
+    over the elements, a pure function of its arguments: it compiles with the world's physics.
+    """
+    flat = obs.reshape(-1)
+    numbers = sensor_noise.hash32(index + sensor_noise.stream_key(seed_key, step))
+    noisy = flat + sensor_noise.normals(numbers, obs.dtype) * scale
+    if dropout is not None:
+        max_value, miss = lidar
+        kept = (flat != miss) & (sensor_noise.uniforms(numbers, obs.dtype) > dropout)
+        readings = torch.where(kept, noisy.clamp(0.0, max_value), torch.full_like(flat, miss))
+        noisy = torch.where(dropout >= 0, readings, noisy)
+    noisy = noisy.view(obs.shape)
+    return (noisy.unbind(0) if per_agent else noisy), step + 1
 
 
 def _one_layout(env, scenario_name: str, config: Randomisation):

@@ -70,7 +70,7 @@ def hashes(key: Tensor, shape, offset: int = 0) -> Tensor:
 
 def normals(h: Tensor, dtype: torch.dtype) -> Tensor:
     """Standard normal errors (Irwin-Hall, see the module) from hashes ``h``: their three low bytes."""
-    byte_sum = (h & 0xFF) + (_shifted(h, 8) & 0xFF) + (_shifted(h, 16) & 0xFF)
+    byte_sum = (h & 0xFF) + ((h >> 8) & 0xFF) + ((h >> 16) & 0xFF)  # the byte masks drop the sign's copies
     return (byte_sum.to(dtype) - _BYTE_SUM_MEAN) * _BYTE_SUM_INV_STD
 
 

@@ -24,7 +24,7 @@ What makes it fast is on each side of the step:
 """
 from __future__ import annotations
 
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import torch
 from torch import Tensor
@@ -56,15 +56,21 @@ def _holonomic_swarm(env) -> bool:
     return cached
 
 
-def set_stacked_forces(env, stacked: Tensor) -> bool:
+def set_stacked_forces(env, stacked: Tensor, commands: Optional[Callable[[Tensor, Tensor], Tensor]] = None) -> bool:
     """Apply ``stacked`` ``[A, B, 2]`` (checked, clamped) as every agent's force in one copy, if the world
-    allows it; returns whether it did (otherwise the caller applies them agent by agent)."""
+    allows it; returns whether it did (otherwise the caller applies them agent by agent). ``commands``:
+    what the agents execute instead, ``commands(stacked, into)`` writing it into the block's forces ``into``
+    and returning it (a randomiser's delayed and lagged commands, in place of the copy)."""
     if stacked.requires_grad or not _holonomic_swarm(env):
         return False
     block = env.world._actions
     if block.loose:  # some agent holds a force of its own (one that needs gradients)
         return False
-    block.stacks()[0].copy_(stacked)
+    forces = block.stacks()[0]
+    if commands is None:
+        forces.copy_(stacked)
+    else:
+        stacked = commands(stacked, forces)
     block.publish_u(stacked)
     return True
 
