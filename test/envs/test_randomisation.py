@@ -12,6 +12,7 @@ import pytest
 import torch
 
 import vmas_ros
+from vmas_ros.envs.environment import FEW_ACTION_ELEMENTS
 from vmas_ros.envs.randomisation import SETTINGS, Randomisation
 
 N_ENVS = 64
@@ -209,3 +210,29 @@ def test_a_layout_that_moves_a_column_with_two_errors_is_refused_naming_it():
 
     with pytest.raises(ValueError, match="observation column 1 moves with both the position and the velocity"):
         vmas_ros.make_env(_Overlapping(), num_envs=2, compile_physics=False, randomisation={"position_noise": 0.01})
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["eager", "compiled"])
+@pytest.mark.parametrize("bad", [2.0, float("nan")], ids=["out_of_range", "nan"])
+def test_a_bad_command_is_refused_naming_its_agent_and_nothing_of_it_is_executed(bad, compiled):
+    """Enough envs that the randomiser's own pass checks the commands: a refused step leaves the history,
+    the lag and the forces as they were, so the run goes on as if it had never been asked."""
+    settings = {"command_latency": 0.1, "actuator_lag": 0.2}
+    n_envs = FEW_ACTION_ELEMENTS  # 2 agents x 2 components each: four times the elements checked by clamping
+    twins = [vmas_ros.make_env("navigation", num_envs=n_envs, n_agents=2, seed=1, compile_physics=compiled,
+                               randomisation=settings) for _ in range(2)]
+    commands = [[torch.full((n_envs, 2), value) for _ in range(2)] for value in (0.5, -0.3, 0.8)]
+    refused, clean = twins
+    refused.step(commands[0])
+    clean.step(commands[0])
+    forces_before = refused.agents[1].state.force.clone()
+    wrong = [commands[1][0], commands[1][1].clone()]
+    wrong[1][7, 1] = bad
+    with pytest.raises(ValueError, match=refused.agents[1].name):
+        refused.step(wrong)
+    assert torch.equal(refused.agents[1].state.force, forces_before), "the refused commands reached the forces"
+    for step in commands[1:]:
+        for env in twins:
+            env.step(step)
+        torch.testing.assert_close(refused.agents[0].action.u, clean.agents[0].action.u, rtol=0, atol=0)
+        torch.testing.assert_close(refused.agents[1].state.pos, clean.agents[1].state.pos, rtol=0, atol=0)

@@ -14,6 +14,11 @@ import torch
 from torch import Tensor
 
 
+def per_component(value) -> list:
+    """An action setting given as one number or one per action component, as a list."""
+    return list(value) if isinstance(value, (list, tuple)) else [value]
+
+
 def to_action_tensor(action, agent_name: str, num_envs: int, size: int, device: torch.device, continuous: bool) -> Tensor:
     """Validate one agent's action and return it as a [num_envs, size] tensor on ``device``."""
     if not isinstance(action, Tensor):

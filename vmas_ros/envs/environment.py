@@ -8,6 +8,7 @@ other code using torch's global RNG does not disturb them.
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
@@ -22,7 +23,7 @@ from vmas_ros.envs.limits import check_world_size
 from vmas_ros.envs.memory import check_memory
 from vmas_ros.envs.random_streams import OwnRandomStreams
 from vmas_ros.envs.randomisation import Randomisation
-from vmas_ros.envs.randomiser import Randomiser
+from vmas_ros.envs.randomiser import CommandsRefused, Randomiser
 from vmas_ros.simulator.scenario import BaseScenario
 from vmas_ros.simulator.utils import TorchUtils, as_index_tensor
 
@@ -31,11 +32,6 @@ __all__ = ["Environment"]
 
 #: up to this many action elements (agents x envs x components) the range check clamps and compares
 FEW_ACTION_ELEMENTS = 4096
-
-
-def _per_component(value) -> list:
-    """An action setting given as one number or one per action component, as a list."""
-    return list(value) if isinstance(value, (list, tuple)) else [value]
 
 
 class Environment(OwnRandomStreams):
@@ -207,8 +203,8 @@ class Environment(OwnRandomStreams):
             plans = self._plans = [
                 (self.get_agent_action_size(agent), agent.action_size,
                  self.world.dim_c if not agent.silent and self.world.dim_c > 0 else 0,
-                 all(float(v) == 1 for v in _per_component(agent.action.u_multiplier)),
-                 any(float(v) != 0 for v in _per_component(agent.action.u_noise)))
+                 all(float(v) == 1 for v in act.per_component(agent.action.u_multiplier)),
+                 any(float(v) != 0 for v in act.per_component(agent.action.u_noise)))
                 for agent in self.agents
             ]
         return plans
@@ -240,6 +236,7 @@ class Environment(OwnRandomStreams):
             return
         if same_shapes:
             # one fused check (and one host read) for all agents; the slow per-agent path only names the culprit
+            bounds = None
             if stacked is None:
                 stacked = torch.stack(tensors)
             if stacked.dtype != torch.float32:
@@ -255,18 +252,23 @@ class Environment(OwnRandomStreams):
                 # few: two calls (clamping changes something, or meets a NaN, exactly when an action is out)
                 if not torch.equal(torch.clamp(stacked, low, high), stacked):
                     self._name_bad_action(stacked, tensors)
+            elif self.randomiser is not None and self.randomiser.on_commands:
+                bounds = (low_ad, high_ad)  # checked in the randomiser's own pass over the commands
             else:
                 # the extremes over the batch against the bounds: one pass over the actions (NaN
                 # propagates through min/max and fails both comparisons)
                 smallest, largest = torch.aminmax(stacked, dim=1)  # [A, D]
                 if not bool(((smallest >= low_ad) & (largest <= high_ad)).all()):
                     self._name_bad_action(stacked, tensors)
-            commands = self.randomiser.commands if self.randomiser is not None else None
             # what the agents execute: with a randomiser, the commands delayed and lagged
-            if stacked_step.set_stacked_forces(self, stacked, commands):
-                return
-            if commands is not None:
-                stacked, tensors = commands(stacked), None
+            commands = None if self.randomiser is None else partial(self.randomiser.commands, bounds=bounds)
+            try:
+                if stacked_step.set_stacked_forces(self, stacked, commands):
+                    return
+                if commands is not None:
+                    stacked, tensors = commands(stacked), None
+            except CommandsRefused:  # out of bounds: nothing was executed
+                self._name_bad_action(stacked, tensors)
             tensors = list(stacked.unbind(0)) if tensors is None else tensors
         elif self.clamp_action and self.continuous_actions:
             self._name_bad_action(None, tensors, unbounded=True)

@@ -36,10 +36,14 @@ from vmas_ros.envs import sensor_noise
 from vmas_ros.envs.randomisation import HALF_UP, SETTINGS, Randomisation
 from vmas_ros.simulator.compiling import WorldKernel
 
-__all__ = ["Randomiser", "SEED_OFFSET"]
+__all__ = ["CommandsRefused", "Randomiser", "SEED_OFFSET"]
 
 #: the randomisation's generator starts from the env's seed plus this (any fixed number: apart from the seed)
 SEED_OFFSET = 7_919
+
+
+class CommandsRefused(Exception):
+    """The commands given to :meth:`Randomiser.commands` were out of their bounds: nothing was executed."""
 
 
 class Randomiser:
@@ -54,7 +58,8 @@ class Randomiser:
         self._active = [name for name in SETTINGS if config.active(name)]
         # what runs in a step, decided once (the config is frozen)
         self._latency, self._lag = config.active("command_latency"), config.active("actuator_lag")
-        self._on_commands = config.acts_on_commands
+        #: whether the commands go through commands() (which can check their bounds in the same pass)
+        self.on_commands = config.acts_on_commands
         #: whether the observations handed out go through observations()
         self.on_observations = config.acts_on_observations
         self.generator = torch.Generator(device=env.device)
@@ -151,10 +156,13 @@ class Randomiser:
         world.scale_dynamics(full["mass_scale"], full["drag_scale"])
 
     # ----------------------------------------------------------------- commands
-    def commands(self, given: Tensor, into: Optional[Tensor] = None) -> Tensor:
+    def commands(self, given: Tensor, into: Optional[Tensor] = None, bounds: Optional[Tuple[Tensor, Tensor]] = None
+                 ) -> Tensor:
         """What each agent executes this step, ``[A, B, size]``, from the commands ``given`` now; with
-        ``into`` (a tensor of their shape), also written into it."""
-        if not self._on_commands:
+        ``into`` (a tensor of their shape), also written into it. ``bounds``: each agent's ``(low, high)``
+        ``[A, size]``, checked in the same pass (a NaN fails): out of them, :class:`CommandsRefused` is
+        raised and nothing changes."""
+        if not self.on_commands:
             if into is not None:
                 into.copy_(given)
             return given
@@ -168,8 +176,11 @@ class Randomiser:
                 self._executed = given.new_zeros(given.numel())
             if self._alpha_flat is None:
                 self._alpha_flat = self._alpha.expand(given.shape).reshape(-1)
-        history, lagged, executed = self._delay_and_lag(given, self._history, self._read, self._executed,
-                                                        self._alpha_flat, into)
+        low, high = (None, None) if bounds is None else bounds
+        history, lagged, executed, within = self._delay_and_lag(given, self._history, self._read, self._executed,
+                                                                self._alpha_flat, into, low, high)
+        if within is not None and not bool(within):
+            raise CommandsRefused()
         self._history, self._executed = history, lagged
         return executed
 
@@ -202,14 +213,20 @@ def _as_int32(value: int) -> int:
     return value - (1 << 32) if value >= 1 << 31 else value
 
 
-def _delayed_and_lagged(given: Tensor, history: Optional[Tensor], read: Optional[Tensor],
-                        lagged: Optional[Tensor], alpha: Optional[Tensor], into: Optional[Tensor]):
-    """``(history, lagged, executed)`` for the commands ``given`` ``[A, B, size]``, each of their elements
-    flat as one run ``[N]`` (the compiled pass vectorises along it): ``given`` shifted into ``history``
-    ``[D + 1, N]`` (row k: given k steps ago; None: no latency) and read ``read`` ``[1, N]`` rows back; then
-    lagged, ``lagged`` (the lag's state, None: no lag) moving by ``alpha`` ``[N]`` towards them; ``executed``
-    in the shape of ``given``, also written into ``into`` unless None (where the step reads its forces:
-    the write then costs no pass of its own). New tensors otherwise: it compiles with the world's physics."""
+def _delayed_and_lagged(given: Tensor, history: Optional[Tensor], read: Optional[Tensor], lagged: Optional[Tensor],
+                        alpha: Optional[Tensor], into: Optional[Tensor], low: Optional[Tensor], high: Optional[Tensor]):
+    """``(history, lagged, executed, within)`` for the commands ``given`` ``[A, B, size]``, each of their
+    elements flat as one run ``[N]`` (the compiled pass vectorises along it): ``given`` shifted into
+    ``history`` ``[D + 1, N]`` (row k: given k steps ago; None: no latency) and read ``read`` ``[1, N]`` rows
+    back; then lagged, ``lagged`` (the lag's state, None: no lag) moving by ``alpha`` ``[N]`` towards them;
+    ``executed`` in the shape of ``given``. ``within`` (0-d bool; None without ``low``): whether every
+    command lies in ``[low, high]`` ``[A, size]`` (a NaN does not). ``into`` (unless None) gets ``executed``
+    when within, and keeps what it held otherwise: where the step reads its forces, so the write costs no
+    pass of its own. New tensors otherwise: it compiles with the world's physics."""
+    within = None
+    if low is not None:  # the extremes over the batch against the bounds (NaN fails both comparisons)
+        smallest, largest = torch.aminmax(given, dim=1)
+        within = ((smallest >= low) & (largest <= high)).all()
     executed = given.reshape(-1)
     if history is not None:
         history = torch.cat([executed.unsqueeze(0), history[:-1]])
@@ -218,8 +235,8 @@ def _delayed_and_lagged(given: Tensor, history: Optional[Tensor], read: Optional
         lagged = executed = torch.lerp(lagged, executed, alpha)
     executed = executed.view(given.shape)
     if into is not None:
-        into.copy_(executed)
-    return history, lagged, executed
+        into.copy_(executed if within is None else torch.where(within, executed, into))
+    return history, lagged, executed, within
 
 
 class _NoiseColumns:
