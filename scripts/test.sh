@@ -51,9 +51,17 @@ if [ $# -gt 0 ] || [ "$WORKERS" -le 1 ]; then
   exec "${PYTEST[@]}" "$@"
 fi
 
-# The whole suite: the tests that may share the machine on all workers, a file per
-# worker at a time (module fixtures stay shared); then the `serial` tests (they
-# measure time, rates or load) alone. Both parts always run; exit code: the worse.
+# The whole suite: BenchMARL's venv first (set-up, as the project's venv above: the
+# BenchMARL tests need it, and their fixture only checks it then); the tests that may
+# share the machine on all workers, a file per worker at a time (module fixtures stay
+# shared); then the `serial` tests (they measure time, rates or load) alone. Both
+# parts always run; exit code: the worse.
+start=$SECONDS
+if bash scripts/setup_benchmarl.sh; then
+  echo "test.sh: BenchMARL's venv ready in $(( SECONDS - start )) s"
+else  # the rest still runs; the BenchMARL tests run the set-up again and say why it fails
+  echo "test.sh: BenchMARL's venv failed to set up (see above)"
+fi
 parallel=0 serial=0
 start=$SECONDS
 "${PYTEST[@]}" "${XDIST[@]}" -m "not serial" --durations=15 || parallel=$?
