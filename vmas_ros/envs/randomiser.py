@@ -87,7 +87,7 @@ class Randomiser:
         if config.acts_on_observations:
             self._layout = _one_layout(env, scenario_name, config)
         self._columns: Optional[_NoiseColumns] = None  # once the observations' shape is known
-        self._perturb = None  # _perturbed with the layout's lidar columns, compiled with the world's physics
+        self._perturb = None  # per_agent -> _perturbed as a WorldKernel (compiled with the world's physics)
         self._column_scale: Optional[Tensor] = None  # [A * B * O] each element's error's standard deviation
         self._dropout: Optional[Tensor] = None  # [A * B * O], -1 off the rays (None: no lidar noise or dropout)
         self._agent_rows: Optional[Tensor] = None
